@@ -1,0 +1,235 @@
+"""Invertible multi-view augmentation as per-view affine warps (paper, Sec. 2.3).
+
+Every geometric operation on a view is one 3x3 affine ``A`` that maps *original* pixels to *network* pixels
+(both in :mod:`posenet.cameras`' convention, origin at the top-left pixel's centre). The input is warped with
+``A``; the network's output is brought back with ``A^-1`` before lifting, so the 3D geometry (cameras,
+depth) never sees the augmentation and the loss's gradient flows through the inverse. Two exact inverses:
+
+- :func:`inverse_warp` resamples the heatmaps onto the original pixel grid with ``grid_sample`` (pixels the
+  network never saw are zero-padded, as the paper does for random crops).
+- :func:`network_pixels_in_original` maps every network pixel to the original pixel it came from, so each
+  network pixel is lifted at that location with the original depth found there (nearest). For a crop, resize,
+  flip or rotation this is the same mapping read the other way round: instead of resampling the heatmap on
+  the original grid, the points keep the network's grid and carry their original coordinates. No heatmap
+  value is interpolated, so it is exact; the only difference from the warp-back is the density of points
+  (one per network pixel instead of one per original pixel), i.e. a constant per-view factor on the
+  softmax mass that the network absorbs into its logits.
+
+A horizontal flip also mirrors the person, so the network's "left" channels fire on the right limbs: after
+inverting, the channels are permuted with :data:`posenet.skeleton.FLIP_PERMUTATION` (:func:`unflip_channels`).
+
+Colour jitter (brightness, contrast, saturation) needs no inverse.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch.nn import functional as F
+
+from posenet.skeleton import FLIP_PERMUTATION
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class AugmentConfig:
+    flip: bool = True  # horizontal flip with probability 0.5 (left/right channels swapped back)
+    rotate_deg: float = 15.0  # uniform rotation in [-r, r] about the network image's centre; 0 disables
+    crop: bool = True  # full-image mode: random crop window; person-crop mode: shift/scale jitter of the crop
+    shift: float = 0.08  # person-crop mode: centre shift, as a fraction of the crop side
+    scale: float = 0.15  # person-crop mode: the crop side is multiplied by 2**U(-scale, scale)
+    color: bool = True  # colour jitter
+    brightness: float = 0.25  # factor 1 + U(-b, b)
+    contrast: float = 0.25
+    saturation: float = 0.25
+
+
+# ----------------------------------------------------------------------------- affine building blocks
+def _eye(n: int, dtype=torch.float32, device=None) -> Tensor:
+    return torch.eye(3, dtype=dtype, device=device).expand(n, 3, 3).clone()
+
+
+def translation(tx: Tensor, ty: Tensor) -> Tensor:
+    """(N, 3, 3) translations by ``tx, ty (N,)``."""
+    A = _eye(tx.shape[0], tx.dtype, tx.device)
+    A[:, 0, 2], A[:, 1, 2] = tx, ty
+    return A
+
+
+def scaling(sx: Tensor, sy: Tensor) -> Tensor:
+    """(N, 3, 3) scalings about the origin."""
+    A = _eye(sx.shape[0], sx.dtype, sx.device)
+    A[:, 0, 0], A[:, 1, 1] = sx, sy
+    return A
+
+
+def rotation(theta: Tensor) -> Tensor:
+    """(N, 3, 3) rotations by ``theta (N,)`` radians about the origin (clockwise on screen, y is down)."""
+    c, s = torch.cos(theta), torch.sin(theta)
+    A = _eye(theta.shape[0], theta.dtype, theta.device)
+    A[:, 0, 0], A[:, 0, 1], A[:, 1, 0], A[:, 1, 1] = c, -s, s, c
+    return A
+
+
+def resize_affine(in_size: tuple[int, int], out_size: tuple[int, int], n: int = 1) -> Tensor:
+    """(n, 3, 3) the resize of a ``(W, H)`` image to ``(W', H')``: u' = (u + 0.5) W'/W - 0.5."""
+    fx, fy = out_size[0] / in_size[0], out_size[1] / in_size[1]
+    A = torch.tensor([[fx, 0, 0.5 * fx - 0.5], [0, fy, 0.5 * fy - 0.5], [0, 0, 1]], dtype=torch.float32)
+    return A.expand(n, 3, 3).clone()
+
+
+def box_crop_affine(boxes: Tensor, out_size: int, margin: float = 1.1) -> Tensor:
+    """(N, 3, 3) square crops around ``boxes (N, 4)`` xyxy, of side ``margin * max(w, h)``, resized to
+    ``out_size``.
+
+    The crop's continuous extent [c - s/2, c + s/2] (pixel edges) maps onto [-0.5, out_size - 0.5].
+    """
+    if boxes.ndim != 2 or boxes.shape[-1] != 4:
+        raise ValueError(f"boxes must have shape (N, 4), got {tuple(boxes.shape)}")
+    cx, cy = (boxes[:, 0] + boxes[:, 2]) / 2, (boxes[:, 1] + boxes[:, 3]) / 2
+    side = margin * torch.maximum(boxes[:, 2] - boxes[:, 0], boxes[:, 3] - boxes[:, 1]).clamp_min(1.0)
+    k = out_size / side
+    # u' = (u - cx + s/2) k - 0.5
+    half = torch.full_like(k, -0.5)
+    return translation(half, half) @ scaling(k, k) @ translation(side / 2 - cx, side / 2 - cy)
+
+
+def about_centre(M: Tensor, size: tuple[int, int]) -> Tensor:
+    """Conjugate ``M (N, 3, 3)`` so that it acts about the centre of a ``(W, H)`` image, not the origin."""
+    n = M.shape[0]
+    cx = torch.full((n,), (size[0] - 1) / 2, dtype=M.dtype, device=M.device)
+    cy = torch.full((n,), (size[1] - 1) / 2, dtype=M.dtype, device=M.device)
+    return translation(cx, cy) @ M @ translation(-cx, -cy)
+
+
+def hflip(flipped: Tensor, width: int) -> Tensor:
+    """(N, 3, 3) u' = W - 1 - u where ``flipped (N,)`` is True, identity elsewhere."""
+    A = _eye(flipped.shape[0])
+    A[flipped, 0, 0] = -1
+    A[flipped, 0, 2] = width - 1
+    return A
+
+
+# ----------------------------------------------------------------------------- random draws
+def random_jitter(
+    n: int,
+    config: AugmentConfig,
+    out_size: tuple[int, int],
+    person_crop: bool,
+    generator: torch.Generator | None = None,
+) -> tuple[Tensor, Tensor]:
+    """Draw ``n`` network-space augmentations: ``(J (n, 3, 3), flipped (n,) bool)``; compose as ``J @ base``.
+
+    Person-crop mode: a shift/scale jitter of the crop (the "random crop" of a crop) and the rotation, about
+    the network image's centre. Full-image mode: the random crop window is drawn by the caller (it is part of
+    the base affine); here only the rotation. The flip comes last, so it mirrors the final network image.
+    """
+
+    def uniform(lo: float, hi: float) -> Tensor:
+        return lo + (hi - lo) * torch.rand(n, generator=generator)
+
+    M = _eye(n)
+    if person_crop and config.crop:
+        s = 2.0 ** uniform(-config.scale, config.scale)
+        side = float(max(out_size))
+        shift = uniform(-config.shift, config.shift) * side, uniform(-config.shift, config.shift) * side
+        M = translation(*shift) @ scaling(s, s) @ M
+    if config.rotate_deg > 0:
+        M = rotation(uniform(-config.rotate_deg, config.rotate_deg) * math.pi / 180) @ M
+    M = about_centre(M, out_size)
+    flipped = (torch.rand(n, generator=generator) < 0.5) if config.flip else torch.zeros(n, dtype=torch.bool)
+    return hflip(flipped, out_size[0]) @ M, flipped
+
+
+def random_crop_window(
+    n: int, in_size: tuple[int, int], out_size: tuple[int, int], generator: torch.Generator | None = None
+) -> Tensor:
+    """(n, 3, 3) translations that cut a random ``out_size`` window from an ``in_size`` image (paper)."""
+    if out_size[0] > in_size[0] or out_size[1] > in_size[1]:
+        raise ValueError(f"crop {out_size} larger than the image {in_size}")
+    x0 = torch.randint(0, in_size[0] - out_size[0] + 1, (n,), generator=generator).float()
+    y0 = torch.randint(0, in_size[1] - out_size[1] + 1, (n,), generator=generator).float()
+    return translation(-x0, -y0)
+
+
+def color_jitter(rgb: Tensor, config: AugmentConfig, generator: torch.Generator | None = None) -> Tensor:
+    """Random brightness, contrast and saturation per image of ``rgb (N, 3, H, W)`` in [0, 1]."""
+    n = rgb.shape[0]
+
+    def factor(amount: float) -> Tensor:
+        return (1 + amount * (2 * torch.rand(n, generator=generator) - 1)).to(rgb).view(n, 1, 1, 1)
+
+    x = rgb * factor(config.brightness)
+    grey = (0.299 * x[:, 0:1] + 0.587 * x[:, 1:2] + 0.114 * x[:, 2:3]).clamp(0, 1)  # (N, 1, H, W)
+    x = (x - grey.mean((2, 3), keepdim=True)) * factor(config.contrast) + grey.mean((2, 3), keepdim=True)
+    x = (x - grey) * factor(config.saturation) + grey
+    return x.clamp(0, 1)
+
+
+# ----------------------------------------------------------------------------- warps
+def _apply(A: Tensor, uv: Tensor) -> Tensor:
+    """Apply ``A (N, 3, 3)`` to points ``uv (N, M, 2)``."""
+    return uv @ A[:, :2, :2].transpose(1, 2) + A[:, None, :2, 2]
+
+
+def _grid(height: int, width: int, device, dtype) -> Tensor:
+    v, u = torch.meshgrid(
+        torch.arange(height, device=device, dtype=dtype),
+        torch.arange(width, device=device, dtype=dtype),
+        indexing="ij",
+    )
+    return torch.stack([u, v], -1).reshape(1, height * width, 2)  # (1, H*W, 2)
+
+
+def network_pixels_in_original(A: Tensor, out_size: tuple[int, int]) -> Tensor:
+    """``(N, h*w, 2)`` original pixel coordinates of every network pixel (row-major): ``A^-1 (u', v')``."""
+    w, h = out_size
+    grid = _grid(h, w, A.device, A.dtype).expand(A.shape[0], h * w, 2)
+    return _apply(torch.linalg.inv(A), grid)
+
+
+def _normalise(uv: Tensor, size: tuple[int, int]) -> Tensor:
+    """Pixels to grid_sample's [-1, 1] (align_corners=False: -1 and 1 are the outer pixel edges)."""
+    scale = torch.tensor([2.0 / size[0], 2.0 / size[1]], dtype=uv.dtype, device=uv.device)
+    return (uv + 0.5) * scale - 1
+
+
+def warp(images: Tensor, A: Tensor, out_size: tuple[int, int], mode: str = "bilinear") -> Tensor:
+    """Warp ``images (N, C, H, W)`` with ``A (N, 3, 3)`` into ``(N, C, h, w)``; outside the image -> 0.
+
+    Use ``mode="nearest"`` for depth and masks, so that no unknown (0) depth is blended into a valid one.
+    """
+    if images.ndim != 4 or A.shape != (images.shape[0], 3, 3):
+        raise ValueError(
+            f"warp expects images (N, C, H, W) and A (N, 3, 3), got {tuple(images.shape)}, {tuple(A.shape)}"
+        )
+    w, h = out_size
+    src = network_pixels_in_original(A.to(torch.float32), out_size)  # (N, h*w, 2)
+    grid = _normalise(src, (images.shape[-1], images.shape[-2])).view(-1, h, w, 2).to(images.dtype)
+    return F.grid_sample(images, grid, mode=mode, padding_mode="zeros", align_corners=False)
+
+
+def inverse_warp(heatmaps: Tensor, A: Tensor, in_size: tuple[int, int]) -> Tensor:
+    """Bring network outputs ``(N, J, h, w)`` back onto the original ``(W, H)`` grid: ``(N, J, H, W)``.
+
+    Original pixel p takes the (bilinear) heatmap value at ``A p``; pixels outside the network image get 0
+    (the paper's zero-padding of random crops). Differentiable with respect to ``heatmaps``.
+    """
+    W, H = in_size
+    h, w = heatmaps.shape[-2:]
+    dst = _apply(A.to(torch.float32), _grid(H, W, A.device, torch.float32).expand(A.shape[0], H * W, 2))
+    grid = _normalise(dst, (w, h)).view(-1, H, W, 2).to(heatmaps.dtype)
+    return F.grid_sample(heatmaps, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+
+def unflip_channels(x: Tensor, flipped: Tensor) -> Tensor:
+    """Swap left/right joint channels (dim 1 of ``x (N, J, ...)``) of the samples where ``flipped (N,)``."""
+    perm = torch.tensor(FLIP_PERMUTATION, device=x.device)
+    if x.shape[1] != len(FLIP_PERMUTATION):
+        raise ValueError(f"expected {len(FLIP_PERMUTATION)} joint channels, got {x.shape[1]}")
+    swapped = x[:, perm]
+    mask = flipped.to(x.device).view(-1, *([1] * (x.ndim - 1)))
+    return torch.where(mask, swapped, x)

@@ -1,0 +1,111 @@
+"""The differentiable model: U-Net per person and view -> inverse augmentation -> lifting -> aggregation.
+
+``PoseNet(config)(scene) -> PoseOutput`` takes a :class:`posenet.inputs.SceneInput` (all persons x views of
+one scene) and runs the U-Net once on every (person, view) pair that has a box, in one batch. The heatmaps are
+brought back to original pixels (:mod:`posenet.augment`), lifted to 3D and aggregated with a softmax over all
+views' points per joint (:mod:`posenet.lifting`). With ``aggregation="2d"`` the paper's 2D baseline is used
+instead (per-view 2D centre of mass, depth look-up, softmax fusion of the views).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+
+import torch
+from torch import nn
+
+from posenet import augment as aug
+from posenet import lifting
+from posenet.inputs import InputConfig, SceneInput
+from posenet.unet import UNet, UNetConfig
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class ModelConfig:
+    inputs: InputConfig = field(default_factory=InputConfig)
+    base: int = 16  # U-Net width (channels of its first level)
+    depth: int = 3  # U-Net downsamplings; 3 suits 96x96 crops (12x12 at the bottom), 4 the paper's 320x240
+    aggregation: str = "3d"  # "3d": the paper's method; "2d": its 2D-loss baseline
+    eps: float = lifting.EPS_LOGIT  # the logit given to points outside the box or without depth
+    channels_last: bool = True  # measured faster on CPU (benchmarks/posenet_speed.py)
+    bf16: bool = (
+        True  # bf16 autocast for the U-Net on CPU (measured ~2-4x faster here); lifting stays float32
+    )
+
+    def __post_init__(self) -> None:
+        if isinstance(self.inputs, dict):
+            self.inputs = InputConfig(**self.inputs)
+        if self.aggregation not in ("3d", "2d"):
+            raise ValueError(f"aggregation must be '3d' or '2d', got {self.aggregation!r}")
+        stride = 2**self.depth
+        sizes = [self.inputs.network_size(t) for t in (True, False)]
+        if self.inputs.mode == "crop":
+            sizes = sizes[:1]
+        for w, h in sizes:
+            if w % stride or h % stride:
+                raise ValueError(f"network input {w}x{h} is not a multiple of the U-Net stride {stride}")
+
+    @property
+    def unet(self) -> UNetConfig:
+        return UNetConfig(in_channels=self.inputs.in_channels, base=self.base, depth=self.depth)
+
+
+@dataclass
+class PoseOutput:
+    """joints (P, J, 3) mm, confidence (P, J) mm, logits (P, V, J, M) at the scene's points, has_points (P,),
+    and for the 2D baseline uv_hat (P, V, J, 2) with view_valid (P, V)."""
+
+    joints: Tensor
+    confidence: Tensor
+    has_points: Tensor
+    logits: Tensor
+    uv_hat: Tensor | None = None
+    view_valid: Tensor | None = None
+
+
+class PoseNet(nn.Module):
+    def __init__(self, config: ModelConfig) -> None:
+        super().__init__()
+        self.config = config
+        self.unet = UNet(config.unet)
+        if config.channels_last:
+            self.unet = self.unet.to(memory_format=torch.channels_last)
+
+    def _autocast(self, device: torch.device):
+        if self.config.bf16:
+            return torch.autocast(device.type, dtype=torch.bfloat16)
+        return contextlib.nullcontext()
+
+    def heatmaps(self, scene: SceneInput) -> Tensor:
+        """U-Net logits ``(P*V, J, h, w)`` in network pixels, zeros for (person, view) pairs without a box."""
+        images = scene.images.to(next(self.parameters()).device)
+        run = scene.has_box.reshape(-1).to(images.device)  # (P*V,)
+        x = images[run]
+        if self.config.channels_last:
+            x = x.contiguous(memory_format=torch.channels_last)
+        with self._autocast(images.device):
+            out = self.unet(x) if x.shape[0] else x.new_zeros(0, self.config.unet.out_channels, *x.shape[-2:])
+        heat = images.new_zeros(images.shape[0], out.shape[1], *images.shape[-2:])
+        heat[run] = out.float()
+        return heat
+
+    def forward(self, scene: SceneInput) -> PoseOutput:
+        heat = self.heatmaps(scene)
+        dev = heat.device
+        P, V = scene.has_box.shape
+        A, flipped = scene.A.to(dev), scene.flipped.to(dev)
+        if scene.mode == "full":
+            heat = aug.inverse_warp(heat, A, scene.image_size)  # (P*V, J, H, W)
+        heat = aug.unflip_channels(heat, flipped)
+        logits = heat.reshape(P, V, heat.shape[1], -1)  # (P, V, J, M)
+        uv, depth, valid = scene.uv.to(dev), scene.depth.to(dev), scene.valid.to(dev)
+        if self.config.aggregation == "2d":
+            est = lifting.fuse_2d(logits, uv, depth, valid, scene.cameras, self.config.eps)
+            uv_hat, view_valid = lifting.centre_of_mass_2d(logits, uv, valid, self.config.eps)
+            return PoseOutput(est.joints, est.confidence, est.has_points, logits, uv_hat, view_valid)
+        points = lifting.lift(scene.cameras, uv, depth)  # (P or 1, V, M, 3)
+        est = lifting.aggregate(logits, points, valid, self.config.eps)
+        return PoseOutput(est.joints, est.confidence, est.has_points, logits)

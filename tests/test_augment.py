@@ -1,0 +1,114 @@
+import math
+
+import numpy as np
+import torch
+
+from posenet import augment as aug
+from posenet.cameras import Camera
+from posenet.inputs import InputConfig, build_scene
+from posenet.skeleton import FLIP_PERMUTATION, JOINTS
+
+
+def _smooth_image(n=2, c=3, h=40, w=56):
+    v, u = torch.meshgrid(
+        torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32), indexing="ij"
+    )
+    chans = [torch.sin(u / 7 + k) * torch.cos(v / 9 - k) for k in range(c)]
+    return torch.stack(chans).expand(n, c, h, w).clone()
+
+
+def test_affine_round_trip_of_pixels():
+    g = torch.Generator().manual_seed(0)
+    J, _ = aug.random_jitter(5, aug.AugmentConfig(), (32, 32), person_crop=True, generator=g)
+    A = J @ aug.box_crop_affine(torch.tensor([[10.0, 20, 60, 90]]).expand(5, 4), 32)
+    src = aug.network_pixels_in_original(A, (32, 32))  # (5, 1024, 2)
+    back = src @ A[:, :2, :2].transpose(1, 2) + A[:, None, :2, 2]
+    grid = aug._grid(32, 32, None, torch.float32).expand(5, -1, -1)
+    torch.testing.assert_close(back, grid, atol=1e-3, rtol=0)
+
+
+def test_flip_and_integer_crop_invert_exactly():
+    img = _smooth_image()
+    flipped = torch.tensor([True, False])
+    A = aug.hflip(flipped, 40) @ aug.translation(torch.tensor([-7.0, -3.0]), torch.tensor([-5.0, 0.0]))
+    net = aug.warp(img, A, (40, 32))
+    torch.testing.assert_close(net[0], img[0, :, 5:37, 7:47].flip(-1))
+    back = aug.inverse_warp(net, A, (56, 40))
+    torch.testing.assert_close(back[0, :, 5:37, 7:47], img[0, :, 5:37, 7:47])
+    torch.testing.assert_close(back[1, :, 0:32, 3:43], img[1, :, 0:32, 3:43])
+    assert (back[0, :, :5] == 0).all() and (back[0, :, :, 48:] == 0).all()  # zero padding outside the crop
+
+
+def test_rotation_round_trip_interior():
+    img = _smooth_image(n=1)
+    A = aug.about_centre(aug.rotation(torch.tensor([12 * math.pi / 180])), (56, 40))
+    back = aug.inverse_warp(aug.warp(img, A, (56, 40)), A, (56, 40))
+    inner = (slice(None), slice(None), slice(12, 28), slice(16, 40))
+    assert (back[inner] - img[inner]).abs().max() < 0.02  # two bilinear resamplings of a smooth image
+
+
+def test_inverse_warp_is_differentiable():
+    A = aug.about_centre(aug.rotation(torch.tensor([0.2])), (8, 8))
+    heat = torch.randn(1, 2, 8, 8, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda h: aug.inverse_warp(h, A, (10, 9)), (heat,))
+
+
+def test_flip_swaps_left_and_right():
+    assert JOINTS[FLIP_PERMUTATION[JOINTS.index("left_wrist")]] == "right_wrist"
+    # A mirror-equivariant "network": on the flipped image, the person's left shoulder looks like a right one.
+    heat = torch.zeros(1, 10, 12, 16)
+    heat[0, JOINTS.index("left_shoulder"), 4, 3] = 1.0
+    heat[0, JOINTS.index("head"), 2, 8] = 1.0
+    A = aug.hflip(torch.tensor([True]), 16)
+    network_out = aug.warp(heat, A, (16, 12))[:, list(FLIP_PERMUTATION)]
+    assert network_out[0, JOINTS.index("right_shoulder"), 4, 12] == 1.0
+    back = aug.unflip_channels(aug.inverse_warp(network_out, A, (16, 12)), torch.tensor([True]))
+    torch.testing.assert_close(back, heat)
+    kept = aug.unflip_channels(heat, torch.tensor([False]))
+    torch.testing.assert_close(kept, heat)
+
+
+def test_color_jitter_range_and_identity():
+    g = torch.Generator().manual_seed(1)
+    x = torch.rand(4, 3, 8, 8, generator=g)
+    y = aug.color_jitter(x, aug.AugmentConfig(), g)
+    assert y.min() >= 0 and y.max() <= 1 and not torch.allclose(x, y)
+    none = aug.AugmentConfig(brightness=0, contrast=0, saturation=0)
+    torch.testing.assert_close(aug.color_jitter(x, none, g), x)
+
+
+def test_box_crop_maps_box_to_crop():
+    A = aug.box_crop_affine(torch.tensor([[100.0, 50, 140, 130]]), 64, margin=1.0)
+    # the square crop of side 80 spans u in [80, 160] (continuous): it must land on the network's outer edges
+    edges = torch.tensor([[[80.0, 90.0], [160.0, 90.0], [120.0, 50.0]]])
+    mapped = edges @ A[:, :2, :2].transpose(1, 2) + A[:, None, :2, 2]
+    expected = torch.tensor([[-0.5, 31.5], [63.5, 31.5], [31.5, -0.5]])
+    torch.testing.assert_close(mapped[0], expected, atol=1e-4, rtol=0)
+
+
+def test_crop_points_carry_original_pixels_and_depth():
+    rng = np.random.default_rng(0)
+    H, W = 60, 80
+    depth = rng.integers(1000, 4000, (H, W)).astype(np.uint16)
+    depth[:, :5] = 0
+    color = rng.integers(0, 255, (H, W, 3)).astype(np.uint8)
+    views = [(color, depth, Camera.create(50, 50, 40, 30))] * 2
+    boxes = torch.tensor([[[2.0, 10, 40, 50], [20, 5, 60, 55]]])
+    cfg = InputConfig(mode="crop", crop_size=32)
+    scene = build_scene(
+        views,
+        boxes,
+        torch.ones(1, 2, dtype=torch.bool),
+        cfg,
+        aug.AugmentConfig(),
+        torch.Generator().manual_seed(3),
+    )
+    uv = scene.uv.reshape(-1, 2)
+    inside = (uv[:, 0] > -0.5) & (uv[:, 0] < W - 0.5) & (uv[:, 1] > -0.5) & (uv[:, 1] < H - 0.5)
+    iu, iv = uv[inside].round().long().unbind(-1)
+    torch.testing.assert_close(
+        scene.depth.reshape(-1)[inside], torch.from_numpy(depth.astype(np.float32))[iv, iu]
+    )
+    assert (scene.depth.reshape(-1)[~inside] == 0).all()
+    assert not scene.valid.reshape(-1)[scene.depth.reshape(-1) == 0].any()
+    assert scene.images.shape == (2, cfg.in_channels, 32, 32)
