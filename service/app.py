@@ -1,0 +1,76 @@
+"""The FastAPI app: ``uvicorn service.app:app`` (settings from ``ORPOSE_*`` env vars, see
+service/settings.py).
+
+``create_app(settings, pipeline)`` builds an app; the module attribute ``app`` is built on first access, so
+that importing this module reads no environment and loads no model. The models load once, in the lifespan,
+into ``app.state.pipeline``, unless a ready pipeline is passed in (tests, offline tools).
+"""
+
+from __future__ import annotations
+
+from contextlib import asynccontextmanager
+
+import anyio
+import torch
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
+
+from service.errors import InputError
+from service.limits import BodyLimitMiddleware, InFlightLimiter
+from service.pipeline import ScenePipeline
+from service.routes import protected, public
+from service.settings import Settings
+
+
+@asynccontextmanager
+async def lifespan(app: FastAPI):
+    settings: Settings = app.state.settings
+    torch.set_num_threads(settings.threads)
+    app.state.inference_limiter = anyio.CapacityLimiter(settings.inference_workers)
+    if app.state.pipeline is None:
+        app.state.pipeline = await anyio.to_thread.run_sync(
+            lambda: ScenePipeline.from_checkpoints(
+                settings.pose_checkpoint,
+                settings.detector_checkpoint,
+                settings.device,
+                settings.load_detector,
+            )
+        )
+    yield
+    app.state.pipeline = None
+
+
+async def _input_error(request: Request, exc: InputError) -> JSONResponse:
+    return JSONResponse({"detail": exc.message}, status_code=exc.status)
+
+
+def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None = None) -> FastAPI:
+    """The app; ``pipeline`` (already loaded) skips loading the models from ``settings``' checkpoints."""
+    settings = settings or Settings()
+    app = FastAPI(
+        title="OR multi-view RGB-D 3D human pose",
+        version="0.1.0",
+        description="3D upper-body poses (10 MVOR joints, mm) of everyone in a synchronised multi-view "
+        "RGB-D frame, "
+        "after Gerats et al., 'Differentiable projections'. See docs/service.md.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.state.pipeline = pipeline
+    app.state.in_flight = InFlightLimiter(settings.max_in_flight)
+    app.add_middleware(
+        BodyLimitMiddleware, max_bytes=settings.max_body_bytes, timeout_s=settings.body_timeout_s
+    )
+    app.add_exception_handler(InputError, _input_error)
+    app.include_router(public)
+    app.include_router(protected)
+    return app
+
+
+def __getattr__(name: str):
+    # `uvicorn service.app:app` looks the attribute up; building it here (once) keeps imports free of side
+    # effects.
+    if name == "app":
+        globals()["app"] = create_app()
+        return globals()["app"]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

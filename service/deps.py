@@ -1,0 +1,68 @@
+"""FastAPI dependencies, as ``Annotated`` aliases: settings, the loaded pipeline, the bearer token,
+admission."""
+
+from __future__ import annotations
+
+import secrets
+from collections.abc import AsyncIterator
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+
+from service.pipeline import ScenePipeline
+from service.settings import Settings
+
+_bearer = HTTPBearer(
+    auto_error=False, description="Required on every route but /health when the server sets ORPOSE_TOKEN"
+)
+
+
+def get_settings(request: Request) -> Settings:
+    return request.app.state.settings
+
+
+SettingsDep = Annotated[Settings, Depends(get_settings)]
+
+
+def require_token(
+    settings: SettingsDep, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+) -> None:
+    """401 unless the request carries ``Authorization: Bearer <ORPOSE_TOKEN>`` (when a token is
+    configured)."""
+    if settings.token is None:
+        return
+    expected = settings.token.get_secret_value().encode()
+    given = b"" if credentials is None else credentials.credentials.encode()
+    if not secrets.compare_digest(given, expected):  # constant time: the token cannot be guessed byte by byte
+        raise HTTPException(401, "missing or wrong bearer token", headers={"WWW-Authenticate": "Bearer"})
+
+
+def get_pipeline(request: Request) -> ScenePipeline:
+    pipeline = getattr(request.app.state, "pipeline", None)
+    if pipeline is None:
+        raise HTTPException(503, "the models are not loaded yet", headers={"Retry-After": "5"})
+    return pipeline
+
+
+PipelineDep = Annotated[ScenePipeline, Depends(get_pipeline)]
+
+
+async def admit(request: Request, settings: SettingsDep) -> AsyncIterator[None]:
+    """Hold one of the ``max_in_flight`` slots for the whole request, or answer 503 with Retry-After at
+    once."""
+    limiter = request.app.state.in_flight
+    if not limiter.try_acquire():
+        raise HTTPException(
+            503,
+            f"the server is busy ({limiter.capacity} requests in flight); retry after "
+            f"{settings.retry_after_s} s",
+            headers={"Retry-After": str(settings.retry_after_s)},
+        )
+    try:
+        yield
+    finally:
+        limiter.release()
+
+
+Admitted = Annotated[None, Depends(admit)]

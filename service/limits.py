@@ -1,0 +1,94 @@
+"""Overload protection: a cap on the body (size and time to receive it) and a bound on requests in flight.
+
+The body cap is a pure ASGI middleware, so it acts before anything reads the body: a declared Content-Length
+over the limit is answered 413 at once, and a body that streams past the limit (chunked, or a lying header)
+fails with 413 as soon as it does. A body that takes longer than ``timeout_s`` to arrive gets a 408, so a
+slow client cannot hold a slot for ever. The in-flight bound turns excess load into an immediate 503 with
+Retry-After instead of an unbounded queue.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import anyio
+from starlette.exceptions import HTTPException
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+
+class BodyLimitMiddleware:
+    """Reject request bodies larger than ``max_bytes`` (413) or slower than ``timeout_s`` to arrive (408)."""
+
+    def __init__(self, app: ASGIApp, max_bytes: int, timeout_s: float) -> None:
+        self.app = app
+        self.max_bytes = max_bytes
+        self.timeout_s = timeout_s
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        declared = dict(scope["headers"]).get(b"content-length")
+        if declared is not None:
+            try:
+                declared_bytes = int(declared)
+            except ValueError:
+                await _send_error(send, 400, "Content-Length is not an integer")
+                return
+            if declared_bytes > self.max_bytes:
+                await _send_error(send, 413, self._too_large(declared_bytes))
+                return
+        received = 0
+        done = False
+        deadline = time.monotonic() + self.timeout_s
+
+        async def limited_receive() -> Message:
+            nonlocal received, done
+            if done:  # after the body, receive only waits for a disconnect: no deadline applies
+                return await receive()
+            try:
+                with anyio.fail_after(max(deadline - time.monotonic(), 0.0)):
+                    message = await receive()
+            except TimeoutError:
+                detail = f"the request body did not arrive within {self.timeout_s:g} s"
+                raise HTTPException(408, detail) from None
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > self.max_bytes:
+                    raise HTTPException(413, self._too_large(received))
+                done = not message.get("more_body", False)
+            return message
+
+        await self.app(scope, limited_receive, send)
+
+    def _too_large(self, size: int) -> str:
+        limit = self.max_bytes
+        return f"request body of {size}+ bytes exceeds the limit of {limit} bytes (ORPOSE_MAX_BODY_BYTES)"
+
+
+async def _send_error(send: Send, status: int, detail: str) -> None:
+    body = json.dumps({"detail": detail}).encode()
+    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]
+    # The body was not read: ask the client to close, so that unread bytes are not taken for the next request.
+    headers.append((b"connection", b"close"))
+    await send({"type": "http.response.start", "status": status, "headers": headers})
+    await send({"type": "http.response.body", "body": body})
+
+
+class InFlightLimiter:
+    """At most ``capacity`` requests admitted at once. Used only from the event loop, so a plain counter is
+    safe."""
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = capacity
+        self.in_flight = 0
+
+    def try_acquire(self) -> bool:
+        if self.in_flight >= self.capacity:
+            return False
+        self.in_flight += 1
+        return True
+
+    def release(self) -> None:
+        self.in_flight -= 1

@@ -1,0 +1,213 @@
+"""The two-stage pipeline: person boxes per view (detected or given), grouped across views, then 3D poses.
+
+This is the object that the app and the offline evaluation share. It knows nothing of HTTP: it takes decoded
+numpy views with their cameras (and optionally reference boxes) and returns persons with their joints in mm
+in the reference frame, per-joint confidence, the supporting views and boxes, and per-stage timings.
+
+Offline use::
+
+    pipe = ScenePipeline.from_checkpoints()            # the shipped weights
+    result = pipe.run(views)                            # detector mode
+    result = pipe.run(views, boxes, person_ids)         # reference-box mode (the paper's evaluation setting)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from posenet.cameras import Camera
+from posenet.data.sample import Sample
+
+
+class FrameView(NamedTuple):
+    """One view of a frame, in the form ``PoseEstimator.predict`` takes.
+
+    color: (H, W, 3) uint8 RGB or None; depth: (H, W) uint16 mm (0 = unknown); camera: its unbatched Camera.
+    """
+
+    color: np.ndarray | None
+    depth: np.ndarray
+    camera: Camera
+
+
+@dataclass
+class PipelineConfig:
+    # The paper's matching threshold t = 75 cm, chosen there by visual inspection.
+    match_threshold_mm: float = 750.0
+
+
+@dataclass
+class PersonResult:
+    """One person of a scene.
+
+    Attributes:
+        id: the client's person id (reference-box mode with ids) or an index within the scene.
+        joints: (J, 3) float mm, reference frame.
+        confidence: (J,) float, the pose network's per-joint spread in mm (smaller is more certain).
+        boxes: V entries: the person's (4,) xyxy box in that view, or None where it has none.
+        scores: V entries: the detector score of that box, or None (reference box or no box).
+    """
+
+    id: int
+    joints: np.ndarray
+    confidence: np.ndarray
+    boxes: list[np.ndarray | None]
+    scores: list[float | None]
+
+    @property
+    def support(self) -> list[int]:
+        """The views in which this person has a box."""
+        return [v for v, box in enumerate(self.boxes) if box is not None]
+
+
+@dataclass
+class SceneResult:
+    """The persons of one frame and the milliseconds spent in each stage (detect, match, pose)."""
+
+    mode: str  # "reference_boxes" or "detector"
+    persons: list[PersonResult]
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+def _ms(t0: float) -> float:
+    return (time.perf_counter() - t0) * 1e3
+
+
+def group_by_ids(person_ids: list[np.ndarray]) -> tuple[list[int], list[list[int]]]:
+    """Group boxes by the client's ids: the sorted ids and, per id, per view the box index or -1."""
+    ids = sorted({int(i) for per_view in person_ids for i in per_view})
+    lookup = [{int(pid): k for k, pid in enumerate(per_view)} for per_view in person_ids]
+    return ids, [[view.get(pid, -1) for view in lookup] for pid in ids]
+
+
+class ScenePipeline:
+    """Detector (optional) + cross-view matcher + pose network, run on one frame at a time.
+
+    Args:
+        pose: a ``posenet.infer.PoseEstimator`` (anything with its ``predict(views, person_boxes)``).
+        detector: a ``detector.infer.PersonDetector``, or None for reference-box mode only.
+        config: matching settings.
+    """
+
+    def __init__(self, pose, detector=None, config: PipelineConfig | None = None) -> None:
+        self.pose = pose
+        self.detector = detector
+        self.config = config or PipelineConfig()
+
+    @classmethod
+    def from_checkpoints(
+        cls,
+        pose_checkpoint: str | Path | None = None,
+        detector_checkpoint: str | Path | None = None,
+        device: str = "cpu",
+        load_detector: bool = True,
+        config: PipelineConfig | None = None,
+    ) -> ScenePipeline:
+        """Load both models; ``None`` paths mean the weights shipped with the package."""
+        from posenet.infer import PoseEstimator
+
+        from detector.infer import PersonDetector
+
+        pose = PoseEstimator.from_checkpoint(pose_checkpoint, device=device)
+        detector = (
+            PersonDetector.from_checkpoint(detector_checkpoint, device=device) if load_detector else None
+        )
+        return cls(pose, detector, config)
+
+    # ----------------------------------------------------------------------------------------- stages
+    def _match(self, boxes: list[np.ndarray], views: list[FrameView]) -> list[list[int]]:
+        """Group boxes across views by their 3D centres: per person, per view a box index or -1."""
+        from detector.matching import match_boxes
+
+        groups = match_boxes(
+            boxes,
+            [v.depth for v in views],
+            [v.camera for v in views],
+            threshold_mm=self.config.match_threshold_mm,
+        )
+        return [list(group.indices) for group in groups]
+
+    def run(
+        self,
+        views: list[FrameView],
+        boxes: list[np.ndarray] | None = None,
+        person_ids: list[np.ndarray] | None = None,
+    ) -> SceneResult:
+        """Estimate every person's 3D pose in one frame.
+
+        Args:
+            views: V views (colour may be None when the pose network does not read it and boxes are given).
+            boxes: per view (K_v, 4) xyxy reference boxes; None runs the detector instead.
+            person_ids: per view (K_v,) identities of the reference boxes; None groups them with the matcher.
+        """
+        if not views:
+            raise ValueError("a scene needs at least one view")
+        timings = {"detect": 0.0, "match": 0.0, "pose": 0.0}
+        scores: list[np.ndarray | None] = [None] * len(views)
+        if boxes is None:
+            if self.detector is None:
+                raise ValueError("no detector is loaded: give reference boxes")
+            t0 = time.perf_counter()
+            detections = self.detector.detect([v.color for v in views], depths=[v.depth for v in views])
+            timings["detect"] = _ms(t0)
+            boxes = [np.asarray(d.boxes, np.float32).reshape(-1, 4) for d in detections]  # (K_v, 4) each
+            scores = [np.asarray(d.scores, np.float32).reshape(-1) for d in detections]  # (K_v,) each
+            person_ids = None
+        elif len(boxes) != len(views):
+            raise ValueError(f"boxes has {len(boxes)} entries for {len(views)} views")
+        t0 = time.perf_counter()
+        if person_ids is not None:
+            ids, groups = group_by_ids(person_ids)
+        elif any(len(b) for b in boxes):
+            groups = self._match(boxes, views)
+            ids = list(range(len(groups)))
+        else:
+            ids, groups = [], []
+        timings["match"] = _ms(t0)
+        persons = [
+            PersonResult(
+                pid,
+                np.zeros(0),
+                np.zeros(0),
+                [None if k < 0 else boxes[v][k] for v, k in enumerate(group)],
+                [None if k < 0 or scores[v] is None else float(scores[v][k]) for v, k in enumerate(group)],
+            )
+            for pid, group in zip(ids, groups, strict=True)
+        ]
+        t0 = time.perf_counter()
+        if persons:
+            prediction = self.pose.predict(list(views), [p.boxes for p in persons])
+            joints = np.asarray(prediction.joints, dtype=np.float64)  # (P, J, 3)
+            confidence = np.asarray(prediction.confidence, dtype=np.float64)  # (P, J)
+            for p, person in enumerate(persons):
+                person.joints, person.confidence = joints[p], confidence[p]
+        timings["pose"] = _ms(t0)
+        return SceneResult("detector" if scores[0] is not None else "reference_boxes", persons, timings)
+
+    # ----------------------------------------------------------------------------------------- offline
+    def run_sample(self, sample: Sample, reference_boxes: bool = True) -> tuple[SceneResult, list[dict]]:
+        """Run on a dataset :class:`Sample`; also return its predictions in ``posenet.evaluate``'s format.
+
+        With ``reference_boxes`` the sample's annotated boxes and person ids are used (the paper's ablation
+        setting), so each prediction carries the ground truth's person id. In detector mode the ids are the
+        scene's indices and ``posenet.evaluate`` has to associate them with the ground truth.
+        """
+        views = [FrameView(v.color, v.depth, v.camera) for v in sample.views]
+        if reference_boxes:
+            keep = [v.box_person_ids >= 0 for v in sample.views]  # boxes without identity have no 3D pose
+            result = self.run(
+                views, [v.boxes[k] for v, k in zip(sample.views, keep, strict=True)],
+                [v.box_person_ids[k] for v, k in zip(sample.views, keep, strict=True)],
+            )  # fmt: skip
+        else:
+            result = self.run(views)
+        predictions = [
+            {"image_ids": sample.id, "person_id": p.id, "keypoints3D": p.joints.reshape(-1).tolist()}
+            for p in result.persons
+        ]
+        return result, predictions

@@ -1,0 +1,177 @@
+"""Every request and response body of the service, with what each field means and its frame and unit.
+
+Coordinates follow ``posenet.cameras``: 3D points are millimetres in the *reference frame*, the frame that
+every view's extrinsics T(view->reference) map into: view 0's camera frame when its extrinsics are the
+identity, as with MVOR's calibration (OpenCV axes: x right, y down, z forward). 2D boxes are pixels of the
+image as sent, ``(x0, y0, x1, y1)`` with the origin at the centre of the top-left pixel.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from posenet.skeleton import JOINTS
+
+Box = tuple[float, float, float, float]
+Matrix4 = tuple[
+    tuple[float, float, float, float],
+    tuple[float, float, float, float],
+    tuple[float, float, float, float],
+    tuple[float, float, float, float],
+]
+
+
+# ----------------------------------------------------------------------------------------------- request
+class CameraIn(BaseModel):
+    """One view's calibration (MVOR's ``cameras_info.camParams`` for that camera, in these names)."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    fx: float = Field(..., gt=0, description="focal length along x, pixels (MVOR: focallength[0])")
+    fy: float = Field(..., gt=0, description="focal length along y, pixels (MVOR: focallength[1])")
+    cx: float = Field(
+        ..., description="principal point x, pixels (MVOR: principalpoint[0]); inside the image"
+    )
+    cy: float = Field(
+        ..., description="principal point y, pixels (MVOR: principalpoint[1]); inside the image"
+    )
+    distortion: tuple[float, float, float, float, float] | None = Field(
+        None,
+        description="OpenCV order (k1, k2, p1, p2, k3), or null for an ideal pinhole. MVOR stores "
+        "(k1, k2, k3, p1, p2) and its own 3D annotations ignore distortion: send null for MVOR.",
+    )
+    extrinsics: Matrix4 = Field(
+        ...,
+        description="4x4 rigid transform T(view->reference), row-major, translation in mm: p_ref = R "
+        "p_view + t. "
+        "The reference frame is the one these transforms map into; with MVOR's calibration "
+        "(cameras_info.camParams.extrinsics[v] reshaped to 4x4) it is camera 0's, whose T is the identity.",
+    )
+    image_size: tuple[int, int] | None = Field(
+        None,
+        description="(width, height) in pixels the intrinsics were calibrated for; if given, the "
+        "images "
+        "sent must have exactly this size (MVOR: imagesize)",
+    )
+
+
+class ViewIn(BaseModel):
+    """One view of the scene. Its images are the form's file parts ``color_<i>`` and ``depth_<i>``."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    camera: CameraIn
+    depth_scale_mm: float = Field(
+        1.0,
+        gt=0,
+        description="millimetres per depth unit of the 16-bit depth PNG (1.0: the PNG holds mm; "
+        "0.1 for 1/10 mm). Depth 0 means unknown.",
+    )
+    boxes: list[Box] | None = Field(
+        None,
+        description="reference person boxes in this view, (x0, y0, x1, y1) pixels. When any view has boxes, "
+        "detection is skipped for every view (reference-box mode; a view with null or [] has no person).",
+    )
+    person_ids: list[int] | None = Field(
+        None,
+        description="optional identity of each box (same length as boxes): boxes with the same id in "
+        "different views are the same person. Without ids, boxes are grouped across views by the 3D matcher.",
+    )
+
+
+class SceneIn(BaseModel):
+    """The ``scene`` form part: one synchronised multi-view frame. View i's images are
+    ``color_i``/``depth_i``."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    views: list[ViewIn] = Field(..., description="the views, in the order of their file parts")
+
+
+# ----------------------------------------------------------------------------------------------- response
+class Joint(BaseModel):
+    name: Literal[JOINTS] = Field(..., description="joint name (MVOR order: " + ", ".join(JOINTS) + ")")  # type: ignore[valid-type]
+    position: tuple[float, float, float] = Field(
+        ...,
+        description="(x, y, z) in mm in the reference frame (the frame the extrinsics map into; "
+        "MVOR: camera 0's)",
+    )
+    confidence: float = Field(
+        ...,
+        description="the network's spread of the joint's 3D estimate, in mm (the softmax-weighted RMS "
+        "distance of the contributing lifted pixels from the estimate): smaller is more certain",
+    )
+
+
+class Support(BaseModel):
+    view: int = Field(..., ge=0, description="index of a view in which this person has a box")
+    box: Box = Field(
+        ..., description="the person's box in that view, (x0, y0, x1, y1) pixels of that view's image"
+    )
+    score: float | None = Field(None, description="detector score in [0, 1]; null for reference boxes")
+
+
+class Person(BaseModel):
+    id: int = Field(
+        ...,
+        description="the person's id: the client's person_id in reference-box mode with ids, "
+        "otherwise an "
+        "index 0..P-1 within this response (not tracked across requests)",
+    )
+    joints: list[Joint] = Field(..., description="the 10 joints, in MVOR order")
+    views: list[Support] = Field(..., description="the supporting views (where the person has a box)")
+
+
+class Timings(BaseModel):
+    """Milliseconds spent in each stage of this request on the server."""
+
+    decode: float = Field(
+        ..., description="parsing the form, decoding and validating the images and cameras, ms"
+    )
+    detect: float = Field(..., description="person detection, ms (0 in reference-box mode)")
+    match: float = Field(..., description="grouping boxes across views into persons, ms")
+    pose: float = Field(..., description="the pose network: heatmaps, lifting and aggregation, ms")
+    encode: float = Field(..., description="building and serialising this response, ms")
+    total: float = Field(..., description="all of the above plus waiting for a free inference worker, ms")
+
+
+class SceneOut(BaseModel):
+    mode: Literal["reference_boxes", "detector"] = Field(
+        ..., description="reference_boxes when the request carried boxes, detector otherwise"
+    )
+    frame: str = Field(
+        "the frame the views' extrinsics T(view->reference) map into (view 0's camera when its T is the "
+        "identity, "
+        "OpenCV axes x right, y down, z forward); unit mm",
+        description="the frame and unit of every 3D coordinate in this response",
+    )
+    persons: list[Person]
+    timings: Timings
+
+
+class ModelInfo(BaseModel):
+    joints: list[str] = Field(..., description="the joints every person has, in order")
+    modalities: list[str] = Field(
+        ..., description="the image modalities the pose network reads (color, depth)"
+    )
+    input_size: tuple[int, int] | None = Field(
+        None, description="(width, height) the pose network works at, pixels (images are resized to it)"
+    )
+    pose_trained_on: str = Field(..., description="what the pose network's weights were trained on")
+    detector_trained_on: str | None = Field(None, description="what the detector's weights were trained on")
+    detector_loaded: bool = Field(..., description="whether detector mode is available")
+    device: str = Field(..., description="the torch device the models run on")
+
+
+class Health(BaseModel):
+    status: Literal["ok"] = "ok"
+
+
+class Ready(BaseModel):
+    ready: bool = Field(..., description="true once the models are loaded")
+
+
+class Error(BaseModel):
+    detail: str = Field(..., description="what was wrong with the request and how to fix it")

@@ -1,0 +1,44 @@
+"""The service's settings: one pydantic-settings class, read from ``ORPOSE_*`` environment variables.
+
+Example: ``ORPOSE_TOKEN=secret ORPOSE_MAX_IN_FLIGHT=2 uvicorn service.app:app``. Nothing is read at import
+time: :func:`service.app.create_app` builds a :class:`Settings` when it is called without one.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field, SecretStr
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Every knob of the service. Each field is also the env var ``ORPOSE_<FIELD NAME IN CAPITALS>``."""
+
+    model_config = SettingsConfigDict(env_prefix="ORPOSE_", extra="ignore")
+
+    # None means the default weights shipped with the package (see posenet.infer / detector.infer).
+    pose_checkpoint: Path | None = Field(
+        None, description="pose network checkpoint; unset = the shipped weights"
+    )
+    detector_checkpoint: Path | None = Field(None, description="DETR checkpoint; unset = the shipped weights")
+    device: str = Field("cpu", description="torch device for both models, e.g. 'cpu' or 'cuda:0'")
+    threads: int = Field(2, ge=1, le=256, description="torch intra-op threads (torch.set_num_threads)")
+    # One inference at a time by default: torch already uses `threads` cores inside one forward pass, and two
+    # concurrent passes on the same cores only add latency to both.
+    inference_workers: int = Field(1, ge=1, le=64, description="frames processed concurrently by the models")
+    # Requests admitted at once (running + waiting for a worker). Beyond it: 503 with Retry-After, never a
+    # queue.
+    max_in_flight: int = Field(4, ge=1, le=1024, description="requests to /scenes admitted at once")
+    retry_after_s: int = Field(1, ge=1, le=3600, description="Retry-After seconds sent with a 503")
+    # 3 views of 640x480 PNG colour + depth are about 2-3 MB; 64 MiB leaves room for 8 large views.
+    max_body_bytes: int = Field(64 * 2**20, ge=1024, description="largest accepted request body, bytes")
+    body_timeout_s: float = Field(30.0, gt=0, description="time allowed to receive the whole body (else 408)")
+    max_views: int = Field(8, ge=1, le=64, description="most views in one scene")
+    # Checked on the image header before decoding, so a small compressed bomb cannot allocate gigabytes.
+    max_image_pixels: int = Field(1920 * 1200, ge=1, description="largest accepted image, width x height")
+    max_boxes_per_view: int = Field(64, ge=1, description="most reference boxes in one view")
+    token: SecretStr | None = Field(
+        None, description="bearer token; when set every route but /health needs it"
+    )
+    load_detector: bool = Field(True, description="load the detector (False: reference-box mode only)")

@@ -1,0 +1,167 @@
+"""From the request's parts to checked pipeline inputs: the scene JSON, the cameras, the images and the boxes.
+
+Everything a client can get wrong is checked here, and each problem raises :class:`~service.errors.InputError`
+naming the part (``scene``, ``views[1].camera``, ``depth_2``) and what to do about it. HTTP itself (multipart
+parsing, body limits) stays in ``service/routes.py``; the pipeline receives only validated numpy arrays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pydantic
+import torch
+
+from posenet.cameras import Camera, is_rigid
+from service.decode import decode_color, decode_depth
+from service.errors import PAYLOAD_TOO_LARGE, InputError
+from service.pipeline import FrameView
+from service.schemas import SceneIn, ViewIn
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The request limits that validation enforces (a subset of :class:`service.settings.Settings`)."""
+
+    max_views: int = 8
+    max_image_pixels: int = 1920 * 1200
+    max_boxes_per_view: int = 64
+
+
+@dataclass
+class ValidatedScene:
+    """A request ready for :meth:`service.pipeline.ScenePipeline.run`.
+
+    Attributes:
+        views: V views (colour (H, W, 3) uint8 RGB or None, depth (H, W) uint16 mm, Camera).
+        boxes: per view (K_v, 4) float32 xyxy reference boxes, or None for detector mode.
+        person_ids: per view (K_v,) int64 client identities of the boxes, or None (match across views).
+    """
+
+    views: list[FrameView]
+    boxes: list[np.ndarray] | None
+    person_ids: list[np.ndarray] | None
+
+
+def parse_scene(text: str | bytes, limits: Limits) -> SceneIn:
+    """The ``scene`` part's JSON, validated against :class:`SceneIn`."""
+    try:
+        scene = SceneIn.model_validate_json(text)
+    except pydantic.ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in err['loc']) or 'scene'}: {err['msg']}" for err in exc.errors()[:5]
+        )
+        raise InputError(f"scene JSON is invalid: {problems}") from None
+    if not scene.views:
+        raise InputError("scene has 0 views; send at least one view (camera + depth_0 image)")
+    if len(scene.views) > limits.max_views:
+        raise InputError(
+            f"scene has {len(scene.views)} views, more than the limit of {limits.max_views}",
+            PAYLOAD_TOO_LARGE,
+        )
+    return scene
+
+
+def _camera(view: ViewIn, i: int, width: int, height: int) -> Camera:
+    cam = view.camera
+    where = f"views[{i}].camera"
+    if cam.image_size is not None and tuple(cam.image_size) != (width, height):
+        raise InputError(
+            f"{where}.image_size is {cam.image_size[0]}x{cam.image_size[1]} but view {i}'s images are "
+            f"{width}x{height}; send the images at the calibrated size or rescale the intrinsics"
+        )
+    if not (0 <= cam.cx <= width and 0 <= cam.cy <= height):
+        raise InputError(
+            f"{where}: the principal point ({cam.cx:.1f}, {cam.cy:.1f}) lies outside view {i}'s "
+            f"{width}x{height} "
+            "image; the intrinsics were probably calibrated for another resolution"
+        )
+    T = torch.tensor(cam.extrinsics, dtype=torch.float64)
+    if not bool(is_rigid(T)):
+        raise InputError(
+            f"{where}.extrinsics is not a rigid transform (the rotation must be orthonormal with "
+            f"determinant +1 "
+            "and the last row (0, 0, 0, 1)); send T(view->reference) with translation in mm"
+        )
+    return Camera.create(cam.fx, cam.fy, cam.cx, cam.cy, T, cam.distortion, size=(width, height))
+
+
+def _boxes(
+    view: ViewIn, i: int, width: int, height: int, limits: Limits
+) -> tuple[np.ndarray, np.ndarray | None]:
+    boxes = np.asarray(view.boxes or [], dtype=np.float32).reshape(-1, 4)  # (K, 4)
+    if len(boxes) > limits.max_boxes_per_view:
+        raise InputError(f"views[{i}].boxes has {len(boxes)} boxes, more than {limits.max_boxes_per_view}")
+    bad = (boxes[:, 2] <= boxes[:, 0]) | (boxes[:, 3] <= boxes[:, 1])
+    outside = (boxes[:, 2] < 0) | (boxes[:, 3] < 0) | (boxes[:, 0] > width - 1) | (boxes[:, 1] > height - 1)
+    if bad.any():
+        raise InputError(
+            f"views[{i}].boxes[{int(np.argmax(bad))}] is empty: boxes are (x0, y0, x1, y1), x1 > x0, y1 > y0"
+        )
+    if outside.any():
+        raise InputError(
+            f"views[{i}].boxes[{int(np.argmax(outside))}] lies outside the {width}x{height} image"
+        )
+    boxes = np.clip(boxes, 0, [width - 1, height - 1, width - 1, height - 1]).astype(np.float32)
+    if view.person_ids is None:
+        return boxes, None
+    ids = np.asarray(view.person_ids, dtype=np.int64)
+    if len(ids) != len(boxes):
+        raise InputError(f"views[{i}].person_ids has {len(ids)} entries for {len(boxes)} boxes")
+    if len(np.unique(ids)) != len(ids):
+        raise InputError(f"views[{i}].person_ids repeats an id: one person has at most one box per view")
+    return boxes, ids
+
+
+def validate_scene(
+    scene: SceneIn, files: Mapping[str, bytes], limits: Limits, need_color: bool
+) -> ValidatedScene:
+    """Decode and check every view of ``scene`` with its file parts ``color_<i>`` / ``depth_<i>``.
+
+    ``need_color``: whether colour images are required (the pose network reads colour, or detection is
+    needed).
+    """
+    expected = {f"{kind}_{i}" for i in range(len(scene.views)) for kind in ("color", "depth")}
+    unexpected = sorted(set(files) - expected)
+    if unexpected:
+        raise InputError(
+            f"unexpected file part(s) {', '.join(unexpected)}: a scene of {len(scene.views)} views takes "
+            f"color_0..color_{len(scene.views) - 1} and depth_0..depth_{len(scene.views) - 1}"
+        )
+    reference_mode = any(v.boxes is not None for v in scene.views)
+    with_ids = [v.person_ids is not None for v in scene.views if v.boxes]
+    if any(with_ids) and not all(with_ids):
+        raise InputError(
+            "person_ids are given in some views with boxes but not in others: give them for all or none"
+        )
+    if not reference_mode and any(v.person_ids is not None for v in scene.views):
+        raise InputError("person_ids were given without boxes")
+    need_color = need_color or not reference_mode  # the detector reads colour
+    views, all_boxes, all_ids = [], [], []
+    for i, view in enumerate(scene.views):
+        if f"depth_{i}" not in files:
+            raise InputError(f"missing file part depth_{i}: every view needs a 16-bit depth PNG")
+        depth = decode_depth(files[f"depth_{i}"], f"depth_{i}", view.depth_scale_mm, limits.max_image_pixels)
+        height, width = depth.shape
+        color = None
+        if f"color_{i}" in files:
+            color = decode_color(files[f"color_{i}"], f"color_{i}", limits.max_image_pixels)
+            if color.shape[:2] != depth.shape:
+                raise InputError(
+                    f"color_{i} is {color.shape[1]}x{color.shape[0]} but depth_{i} is {width}x{height}: "
+                    "the colour and depth of a view must be registered at the same size"
+                )
+        elif need_color:
+            why = "detection needs colour" if not reference_mode else "the pose network reads colour"
+            raise InputError(f"missing file part color_{i} ({why}); send a PNG or JPEG colour image")
+        views.append(FrameView(color, depth, _camera(view, i, width, height)))
+        boxes, ids = _boxes(view, i, width, height, limits)
+        all_boxes.append(boxes)
+        all_ids.append(ids)
+    if not reference_mode:
+        return ValidatedScene(views, None, None)
+    has_ids = any(ids is not None for ids in all_ids)
+    ids = [np.zeros(0, np.int64) if x is None else x for x in all_ids] if has_ids else None
+    return ValidatedScene(views, all_boxes, ids)
