@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 
@@ -42,3 +42,9 @@ class Settings(BaseSettings):
         None, description="bearer token; when set every route but /health needs it"
     )
     load_detector: bool = Field(True, description="load the detector (False: reference-box mode only)")
+
+    @field_validator("token", mode="before")
+    @classmethod
+    def _empty_token_is_none(cls, value):
+        # compose passes ORPOSE_TOKEN="" when the shell has none: that means no token, not the empty token.
+        return None if value in ("", None) else value
