@@ -1,0 +1,199 @@
+"""Group each person's boxes across views: the paper's 3D box-centre matcher, for any number of views.
+
+The paper (section "Bounding Boxes from Detection Transformer"): lift the centre of every box to 3D with the
+depth image and the camera, move it to the reference frame, form every combination of boxes from distinct
+views, discard a combination when any two of its centres lie more than ``t`` apart (75 cm), then pick
+combinations greedily by shortest mean pairwise distance, preferring combinations with more boxes. Unmatched
+boxes become single-view persons.
+
+Two choices the paper leaves open:
+- **Robust centre depth.** The centre pixel may be a hole (depth 0) or fall between a person's arms onto the
+  wall. The depth used is the median of the valid depths on a ``grid x grid`` lattice over the central
+  ``central_fraction`` of the box (the torso, for a standing or sitting person). A box with no valid depth
+  there has no 3D centre and stays a single-view person.
+- **Enumeration.** Instead of forming all prod(K_v) combinations and discarding most, combinations are grown
+  one view at a time and pruned at each step (every pair must stay within ``t``). This gives exactly the
+  paper's set of valid combinations, vectorised, with work proportional to the number of valid ones: 10 people
+  in 4 views is well under a millisecond.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from posenet.cameras import Camera
+
+
+@dataclass
+class Group:
+    """One person's boxes across the views.
+
+    Attributes:
+        indices: length-V tuple: the index of this person's box in each view's box list, or -1 where it has
+        none.
+        centre: (3,) mean of the member boxes' 3D centres, mm, reference frame (NaN when no member has depth).
+        mean_distance: mean pairwise distance between the member centres, mm (0 for a single box).
+    """
+
+    indices: tuple[int, ...]
+    centre: np.ndarray
+    mean_distance: float
+
+    @property
+    def size(self) -> int:
+        """Number of views in which the person has a box (the paper's "support")."""
+        return sum(i >= 0 for i in self.indices)
+
+
+def box_depths(
+    boxes: np.ndarray, depth: np.ndarray, central_fraction: float = 0.5, grid: int = 7
+) -> np.ndarray:
+    """Robust depth of each box: the median valid depth over its central region.
+
+    Args:
+        boxes: (K, 4) xyxy pixels of the depth image.
+        depth: (H, W) depth in mm, 0 = unknown.
+        central_fraction: side of the sampled region as a fraction of the box side.
+        grid: samples per side of the region.
+
+    Returns:
+        (K,) float64 depths in mm, NaN where no sample had a valid depth.
+    """
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    if depth.ndim != 2:
+        raise ValueError(f"depth must be an (H, W) image, got shape {depth.shape}")
+    if len(boxes) == 0:
+        return np.zeros(0)
+    h, w = depth.shape
+    t = (np.arange(grid) + 0.5) / grid - 0.5  # (G,) offsets in [-0.5, 0.5] of the region
+    cx, cy = (boxes[:, 0] + boxes[:, 2]) / 2, (boxes[:, 1] + boxes[:, 3]) / 2
+    bw, bh = (boxes[:, 2] - boxes[:, 0]) * central_fraction, (boxes[:, 3] - boxes[:, 1]) * central_fraction
+    us = np.clip(np.rint(cx[:, None] + bw[:, None] * t), 0, w - 1).astype(np.int64)  # (K, G)
+    vs = np.clip(np.rint(cy[:, None] + bh[:, None] * t), 0, h - 1).astype(np.int64)  # (K, G)
+    samples = depth[vs[:, :, None], us[:, None, :]].reshape(len(boxes), -1).astype(np.float64)  # (K, G*G)
+    samples[samples <= 0] = np.nan
+    with warnings.catch_warnings():
+        # "All-NaN slice": a box without any valid depth is expected; it gets NaN, handled by the caller.
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(samples, axis=1)
+
+
+def box_centres_3d(
+    boxes: Sequence[np.ndarray],
+    depths: Sequence[np.ndarray],
+    cameras: Camera | Sequence[Camera],
+    central_fraction: float = 0.5,
+    grid: int = 7,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Lift every box centre to the reference frame.
+
+    Returns ``(centres (N, 3), view (N,))`` over the N = sum K_v boxes in view order; rows without depth are
+    NaN.
+    """
+    cams = Camera.stack(list(cameras)) if not isinstance(cameras, Camera) else cameras
+    V = len(boxes)
+    if cams.intrinsics.shape[:-1] != (V,):
+        raise ValueError(f"got {V} box lists but cameras of batch shape {tuple(cams.intrinsics.shape[:-1])}")
+    if len(depths) != V:
+        raise ValueError(f"got {V} box lists but {len(depths)} depth images")
+    boxes = [np.asarray(b, np.float64).reshape(-1, 4) for b in boxes]
+    counts = np.array([len(b) for b in boxes])
+    kmax = max(int(counts.max(initial=0)), 1)
+    uv = np.zeros((V, kmax, 2))
+    z = np.full((V, kmax), np.nan)
+    # One gather per view (views may differ in size); the work inside is vectorised over boxes and samples.
+    for v in range(V):
+        if counts[v]:
+            uv[v, : counts[v]] = (boxes[v][:, :2] + boxes[v][:, 2:]) / 2
+            z[v, : counts[v]] = box_depths(boxes[v], depths[v], central_fraction, grid)
+    cams = cams.to(dtype=torch.float64)
+    _, ref = cams.unproject(torch.from_numpy(uv), torch.from_numpy(np.nan_to_num(z)))  # (V, kmax, 3)
+    ref = ref.numpy()
+    ref[np.isnan(z)] = np.nan
+    valid = np.arange(kmax)[None, :] < counts[:, None]  # (V, kmax)
+    view = np.repeat(np.arange(V), counts)
+    return ref[valid], view
+
+
+def valid_combinations(
+    centres: np.ndarray, view: np.ndarray, threshold_mm: float
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """All combinations of >= 2 boxes from distinct views whose centres are pairwise within ``threshold_mm``.
+
+    Args:
+        centres: (N, 3) box centres (NaN rows never match); view: (N,) view of each box.
+
+    Returns:
+        Per size m = 2, 3, ...: ``(members (P, m), mean_distance (P,))``, members sorted by view.
+    """
+    n = len(centres)
+    dist = np.linalg.norm(centres[:, None] - centres[None, :], axis=-1)  # (N, N), NaN for boxes without depth
+    close = np.nan_to_num(dist, nan=np.inf) <= threshold_mm
+    close &= view[:, None] < view[None, :]  # one box per view, members in increasing view order
+    out = []
+    members = np.arange(n)[:, None]  # (P, 1): every box starts a combination
+    total = np.zeros(n)  # (P,) sum of pairwise distances so far
+    while len(members):
+        # A box extends a combination if it is close to every member (and comes from a later view).
+        ext = np.logical_and.reduce(close[members], axis=1)  # (P, N)
+        p, nxt = np.nonzero(ext)
+        if len(p) == 0:
+            break
+        total = total[p] + dist[members[p], nxt[:, None]].sum(axis=1)
+        members = np.concatenate([members[p], nxt[:, None]], axis=1)  # (P', m + 1)
+        m = members.shape[1]
+        out.append((members, total / (m * (m - 1) / 2)))
+    return out
+
+
+def match_boxes(
+    boxes: Sequence[np.ndarray],
+    depths: Sequence[np.ndarray],
+    cameras: Camera | Sequence[Camera],
+    threshold_mm: float = 750.0,
+    central_fraction: float = 0.5,
+    grid: int = 7,
+) -> list[Group]:
+    """Group the boxes of V views into persons (see the module docstring).
+
+    Args:
+        boxes: V arrays ``(K_v, 4)`` xyxy pixels (K_v may be 0).
+        depths: V depth images ``(H, W)`` uint16 mm (0 = unknown), of the same images as the boxes.
+        cameras: V unbatched cameras, or one camera of batch shape (V,), of those images.
+        threshold_mm: the largest distance allowed between any two centres of a combination (the paper's t).
+
+    Returns:
+        Groups, multi-view ones first (larger, then closer, first), then the unmatched boxes in view order.
+    """
+    centres, view = box_centres_3d(boxes, depths, cameras, central_fraction, grid)
+    V, n = len(boxes), len(view)
+    starts = np.concatenate([[0], np.cumsum([len(np.asarray(b).reshape(-1, 4)) for b in boxes])])
+    local = np.arange(n) - starts[view]  # index of each box within its view
+
+    combos = valid_combinations(centres, view, threshold_mm)
+    used = np.zeros(n, bool)
+    groups = []
+    for members, mean in reversed(combos):  # larger combinations first
+        for i in np.argsort(mean, kind="stable"):  # then the closest first
+            if used[members[i]].any():
+                continue
+            used[members[i]] = True
+            groups.append(_group(members[i], float(mean[i]), centres, view, local, V))
+    for b in np.flatnonzero(~used):
+        groups.append(_group(np.array([b]), 0.0, centres, view, local, V))
+    return groups
+
+
+def _group(members: np.ndarray, mean: float, centres, view, local, V: int) -> Group:
+    indices = [-1] * V
+    for b in members:
+        indices[view[b]] = int(local[b])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a single box without depth: NaN centre
+        centre = np.nanmean(centres[members], axis=0)
+    return Group(tuple(indices), centre, mean)

@@ -1,0 +1,227 @@
+"""DETR person detectors, built from configs through HF transformers (``DetrForObjectDetection``).
+
+Two presets (``PRESETS``):
+
+- ``paper``: the paper's detector, DETR with a ResNet-101-DC5 backbone (60 M parameters), 100 queries, 6 + 6
+  transformer layers. With ``pretrained`` it loads real DETR weights (a local ``save_pretrained`` folder, or a
+  hub id where the hub is reachable) and replaces the class head with one class, "person". The stem and layer1
+  of a pretrained backbone are frozen, as in the original DETR.
+- ``cpu``: a small DETR that trains from random initialisation on two CPU cores: a timm resnet18 cut after
+  layer3 (stride 16, so a 320x240 image gives 20x15 tokens instead of 10x8: small people keep several tokens),
+  d_model 128, 2 + 2 layers, 16 queries (MVOR views hold at most ~6 people), auxiliary decoder losses, and
+  trainable batch norm in the backbone (DETR freezes it, which is right for a pretrained backbone but leaves a
+  random one with no normalisation at all).
+
+Inputs (``input_mode``): ``rgb`` as in the paper; ``depth`` (anonymous, which matters in hospitals) or
+``rgbd``. The preprocessing lives in ``detector.inputs`` and is driven by the same config, which is saved with
+every checkpoint (``detector.checkpoint``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import torch
+from torch import nn
+from transformers import DetrConfig, DetrForObjectDetection
+
+INPUT_CHANNELS = {"rgb": 3, "depth": 1, "rgbd": 4}
+
+
+@dataclass
+class DetectorConfig:
+    """Architecture and preprocessing of a detector. Training hyper-parameters live in ``detector.train``."""
+
+    preset: str = "cpu"
+    backbone: str = (
+        "resnet18"  # a timm model name (timm builds offline; transformers' own ResNet calls the hub)
+    )
+    dilation: bool = False  # DC5: stride 16 in the last stage instead of 32 (the paper's ResNet-101-DC5)
+    backbone_stage: int = 3  # last timm stage used (4 = the whole ResNet); DETR reads only the last one
+    trainable_norm: bool = (
+        True  # swap DETR's frozen batch norm for trainable batch norm (training from scratch)
+    )
+    d_model: int = 128
+    encoder_layers: int = 2
+    decoder_layers: int = 2
+    attention_heads: int = 8
+    ffn_dim: int = 512
+    num_queries: int = 16  # few queries converge faster; MVOR views hold at most ~6 people
+    dropout: float = 0.0  # from scratch on little data, dropout slowed convergence more than it helped
+    auxiliary_loss: bool = True  # a loss on every decoder layer's output: the largest help to convergence
+    eos_coefficient: float = 0.1  # weight of the "no object" class (DETR's default)
+    input_mode: str = "rgb"
+    input_width: int = 320  # images are resized to this width (aspect kept): MVOR's 640x480 -> 320x240
+    pretrained: str | None = None  # local folder or hub id of real DETR weights (``paper``)
+    freeze_stem: bool = False  # freeze stem + layer1 (the original DETR's choice for a pretrained backbone)
+    # Normalisation of the inputs: ImageNet statistics for colour, metres around 2.5 m for depth.
+    rgb_mean: tuple[float, float, float] = (0.485, 0.456, 0.406)
+    rgb_std: tuple[float, float, float] = (0.229, 0.224, 0.225)
+    depth_mean_mm: float = 2500.0
+    depth_std_mm: float = 1000.0
+    extra: dict = field(default_factory=dict)  # free-form notes saved with the config
+
+    def __post_init__(self) -> None:
+        if self.input_mode not in INPUT_CHANNELS:
+            raise ValueError(f"input_mode must be one of {sorted(INPUT_CHANNELS)}, got {self.input_mode!r}")
+        if not 1 <= self.backbone_stage <= 4:
+            raise ValueError(f"backbone_stage must be in 1..4, got {self.backbone_stage}")
+        self.rgb_mean, self.rgb_std = tuple(self.rgb_mean), tuple(self.rgb_std)
+
+    @property
+    def num_channels(self) -> int:
+        return INPUT_CHANNELS[self.input_mode]
+
+
+PRESETS: dict[str, DetectorConfig] = {
+    "cpu": DetectorConfig(),
+    "paper": DetectorConfig(
+        preset="paper",
+        backbone="resnet101",
+        dilation=True,
+        backbone_stage=4,
+        trainable_norm=False,
+        d_model=256,
+        encoder_layers=6,
+        decoder_layers=6,
+        attention_heads=8,
+        ffn_dim=2048,
+        num_queries=100,
+        dropout=0.1,
+        auxiliary_loss=True,
+        input_width=640,
+        freeze_stem=True,
+    ),
+}
+
+
+def preset(name: str, **overrides) -> DetectorConfig:
+    """A copy of preset ``name`` with ``overrides`` applied (unknown names raise ``ValueError``)."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown detector preset {name!r}; choose one of {sorted(PRESETS)}")
+    return replace(PRESETS[name], **{k: v for k, v in overrides.items() if v is not None})
+
+
+def detr_config(cfg: DetectorConfig) -> DetrConfig:
+    """The transformers ``DetrConfig`` of ``cfg`` (offline: a timm backbone with random weights)."""
+    backbone = {
+        "model_type": "timm_backbone",
+        "backbone": cfg.backbone,
+        "num_channels": cfg.num_channels,
+        "features_only": True,
+        "use_pretrained_backbone": False,
+        "out_indices": [cfg.backbone_stage],
+    }
+    if cfg.dilation:
+        backbone["output_stride"] = 16
+    return DetrConfig(
+        backbone_config=backbone,
+        num_channels=cfg.num_channels,
+        num_labels=1,
+        id2label={0: "person"},
+        label2id={"person": 0},
+        num_queries=cfg.num_queries,
+        d_model=cfg.d_model,
+        encoder_layers=cfg.encoder_layers,
+        decoder_layers=cfg.decoder_layers,
+        encoder_attention_heads=cfg.attention_heads,
+        decoder_attention_heads=cfg.attention_heads,
+        encoder_ffn_dim=cfg.ffn_dim,
+        decoder_ffn_dim=cfg.ffn_dim,
+        dropout=cfg.dropout,
+        auxiliary_loss=cfg.auxiliary_loss,
+        eos_coefficient=cfg.eos_coefficient,
+        dilation=cfg.dilation,
+    )
+
+
+def _unfreeze_norm(module: nn.Module) -> None:
+    """Replace DETR's frozen batch norms under ``module`` by trainable ``nn.BatchNorm2d`` with the same
+    values."""
+    for name, child in module.named_children():
+        if type(child).__name__ == "DetrFrozenBatchNorm2d":
+            bn = nn.BatchNorm2d(child.weight.numel())
+            with torch.no_grad():
+                bn.weight.copy_(child.weight)
+                bn.bias.copy_(child.bias)
+                bn.running_mean.copy_(child.running_mean)
+                bn.running_var.copy_(child.running_var)
+            setattr(module, name, bn)
+        else:
+            _unfreeze_norm(child)
+
+
+def set_trainable(model: DetrForObjectDetection, cfg: DetectorConfig) -> None:
+    """Set ``requires_grad`` explicitly: transformers 5.23's own backbone freezing is wrong (see
+    ENVIRONMENT.md).
+
+    Everything trains, except the stem and layer1 of the backbone when ``cfg.freeze_stem`` (a pretrained
+    backbone).
+    """
+    for p in model.parameters():
+        p.requires_grad_(True)
+    if cfg.freeze_stem:
+        for name, p in model.model.backbone.model.named_parameters():
+            if not name.startswith(("layer2", "layer3", "layer4")):
+                p.requires_grad_(False)
+
+
+def from_detr_config(config: DetrConfig, cfg: DetectorConfig) -> DetrForObjectDetection:
+    """A randomly initialised model of ``config``, with ``cfg``'s norm and freezing choices applied."""
+    model = DetrForObjectDetection(config)
+    if cfg.trainable_norm:
+        _unfreeze_norm(model.model.backbone.model)
+    set_trainable(model, cfg)
+    return model
+
+
+def build_detector(cfg: DetectorConfig) -> DetrForObjectDetection:
+    """The detector of ``cfg``: random weights, or real DETR weights from ``cfg.pretrained`` with a new
+    1-class head.
+
+    A pretrained DETR keeps its own architecture (read from its folder); only the class head is replaced. Its
+    backbone must read the same number of channels as ``cfg.input_mode`` gives.
+    """
+    if cfg.pretrained is None:
+        return from_detr_config(detr_config(cfg), cfg)
+    model = DetrForObjectDetection.from_pretrained(
+        cfg.pretrained,
+        num_labels=1,
+        id2label={0: "person"},
+        label2id={"person": 0},
+        ignore_mismatched_sizes=True,  # the class head: N + 1 classes -> person + no-object
+        auxiliary_loss=cfg.auxiliary_loss,
+    )
+    if model.config.num_channels != cfg.num_channels:
+        raise ValueError(
+            f"pretrained DETR {cfg.pretrained!r} reads {model.config.num_channels} channels, but input_mode "
+            f"{cfg.input_mode!r} gives {cfg.num_channels}"
+        )
+    if cfg.trainable_norm:
+        _unfreeze_norm(model.model.backbone.model)
+    set_trainable(model, cfg)
+    return model
+
+
+def param_groups(model: nn.Module, lr: float, backbone_lr: float, weight_decay: float) -> list[dict]:
+    """AdamW groups: the backbone at ``backbone_lr``, the rest at ``lr`` (DETR's recipe); norms get no
+    decay."""
+    groups = {(b, d): [] for b in (True, False) for d in (True, False)}
+    for name, p in model.named_parameters():
+        if not p.requires_grad:
+            continue
+        in_backbone = ".backbone." in f".{name}"
+        decay = p.ndim > 1  # biases and norm scales are not decayed
+        groups[(in_backbone, decay)].append(p)
+    out = []
+    for (in_backbone, decay), params in groups.items():
+        if params:
+            out.append(
+                {
+                    "params": params,
+                    "lr": backbone_lr if in_backbone else lr,
+                    "weight_decay": weight_decay if decay else 0.0,
+                    "name": f"{'backbone' if in_backbone else 'transformer'}{'' if decay else '_nodecay'}",
+                }
+            )
+    return out

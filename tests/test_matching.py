@@ -1,0 +1,191 @@
+"""The cross-view matcher on hand-made scenes with exactly known geometry."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+import torch
+
+from detector.matching import box_centres_3d, box_depths, match_boxes, valid_combinations
+from posenet.cameras import Camera
+
+W, H = 320, 240
+
+
+def ring_cameras(n: int, radius: float = 3000.0) -> list[Camera]:
+    """n cameras on a circle of ``radius`` mm around the origin of camera 0's floor point, looking at its
+    centre.
+
+    Camera 0 is the reference: its T(0->0) is the identity. The scene centre lies 3 m in front of camera 0.
+    """
+    centre = np.array([0.0, 0.0, radius])
+    cams = []
+    for i in range(n):
+        a = 2 * np.pi * i / n
+        # Camera i sits on the circle, rotated by a around the vertical (y) axis through the scene centre.
+        R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+        t = centre - R @ np.array([0.0, 0.0, radius])
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, t
+        cams.append(Camera.create(250.0, 250.0, (W - 1) / 2, (H - 1) / 2, T, size=(W, H)))
+    return cams
+
+
+def render(cams: list[Camera], people: np.ndarray, visible=None, background: int = 0):
+    """Boxes and depth images of ``people (P, 3)`` (mm, reference frame), each a 500 x 1700 mm upright slab.
+
+    ``visible[v]`` lists the people drawn in view v. Returns per view (boxes (K, 4), depth (H, W) uint16, ids
+    (K,)).
+    """
+    out = []
+    for v, cam in enumerate(cams):
+        ids = list(range(len(people))) if visible is None else list(visible[v])
+        cam_pts = cam.to_camera(torch.as_tensor(people, dtype=torch.float64)).numpy()  # (P, 3)
+        depth = np.full((H, W), background, np.uint16)
+        boxes = []
+        # Paint far to near so nearer people occlude farther ones, as in a real depth image.
+        for p in sorted(ids, key=lambda p: -cam_pts[p, 2]):
+            x, y, z = cam_pts[p]
+            u, vv = 250.0 * x / z + (W - 1) / 2, 250.0 * y / z + (H - 1) / 2
+            hw, hh = 250.0 * 250 / z, 250.0 * 850 / z
+            box = np.array([u - hw, vv - hh, u + hw, vv + hh])
+            x0, y0 = max(int(np.ceil(box[0])), 0), max(int(np.ceil(box[1])), 0)
+            x1, y1 = min(int(np.floor(box[2])), W - 1), min(int(np.floor(box[3])), H - 1)
+            depth[y0 : y1 + 1, x0 : x1 + 1] = round(z)
+            boxes.append((p, box))
+        boxes.sort(key=lambda pb: pb[0])
+        out.append(
+            (
+                np.array([b for _, b in boxes], np.float32).reshape(-1, 4),
+                depth,
+                np.array([p for p, _ in boxes], np.int64),
+            )
+        )
+    return out
+
+
+def groups_as_people(groups, views):
+    """Each group as the set of (view, person id) it holds."""
+    return sorted(
+        tuple(sorted((v, int(views[v][2][i])) for v, i in enumerate(g.indices) if i >= 0)) for g in groups
+    )
+
+
+def test_three_views_two_people():
+    cams = ring_cameras(3)
+    people = np.array([[-600.0, 0.0, 3000.0], [700.0, 0.0, 3300.0]])
+    views = render(cams, people)
+    groups = match_boxes([b for b, _, _ in views], [d for _, d, _ in views], cams)
+    assert groups_as_people(groups, views) == [
+        ((0, 0), (1, 0), (2, 0)),
+        ((0, 1), (1, 1), (2, 1)),
+    ]
+    for g in groups:
+        assert g.size == 3 and 0 <= g.mean_distance < 750
+        # The slab is 0 mm thick, so every view's centre lifts onto the person's own vertical axis.
+        assert np.min(np.linalg.norm(people - g.centre, axis=1)) < 300
+
+
+def test_person_seen_once_and_stacked_cameras():
+    cams = ring_cameras(3)
+    people = np.array([[0.0, 0.0, 3000.0], [1200.0, 0.0, 2500.0]])
+    views = render(cams, people, visible=[[0, 1], [0], [0]])
+    boxes, depths = [b for b, _, _ in views], [d for _, d, _ in views]
+    groups = match_boxes(boxes, depths, cams)
+    assert groups_as_people(groups, views) == [((0, 0), (1, 0), (2, 0)), ((0, 1),)]
+    single = [g for g in groups if g.size == 1][0]
+    assert single.indices == (1, -1, -1) and single.mean_distance == 0.0
+    # A stacked camera gives the same groups as the list of cameras.
+    stacked = match_boxes(boxes, depths, Camera.stack(cams))
+    assert [g.indices for g in stacked] == [g.indices for g in groups]
+
+
+def test_threshold_edge_75cm():
+    """Two single-view boxes whose centres lie 740 mm / 760 mm apart match / do not match at t = 750 mm."""
+    cams = ring_cameras(2, radius=3000.0)
+    for gap, expect in ((740.0, 1), (760.0, 2)):
+        # Person A seen only by view 0, person B only by view 1: their centres are exactly `gap` apart in 3D.
+        people = np.array([[0.0, 0.0, 3000.0], [gap, 0.0, 3000.0]])
+        views = render(cams, people, visible=[[0], [1]])
+        centres, _ = box_centres_3d([b for b, _, _ in views], [d for _, d, _ in views], cams)
+        assert np.linalg.norm(centres[0] - centres[1]) == pytest.approx(gap, abs=2.0)
+        groups = match_boxes([b for b, _, _ in views], [d for _, d, _ in views], cams, threshold_mm=750.0)
+        assert len(groups) == expect
+
+
+def test_empty_view_and_no_boxes():
+    cams = ring_cameras(3)
+    people = np.array([[0.0, 0.0, 3000.0]])
+    views = render(cams, people, visible=[[0], [], [0]])
+    groups = match_boxes([b for b, _, _ in views], [d for _, d, _ in views], cams)
+    assert [g.indices for g in groups] == [(0, -1, 0)]
+    none = match_boxes([np.zeros((0, 4))] * 3, [d for _, d, _ in views], cams)
+    assert none == []
+
+
+def test_box_without_depth_stays_single():
+    cams = ring_cameras(2)
+    views = render(cams, np.array([[0.0, 0.0, 3000.0]]))
+    depths = [views[0][1], np.zeros_like(views[1][1])]  # view 1's sensor saw nothing
+    groups = match_boxes([b for b, _, _ in views], depths, cams)
+    assert sorted(g.indices for g in groups) == [(-1, 0), (0, -1)]
+    assert np.isnan(box_depths(views[1][0], depths[1])).all()
+
+
+def test_robust_depth_ignores_holes_and_background():
+    depth = np.full((100, 100), 5000, np.uint16)
+    depth[20:80, 30:70] = 2000  # the person
+    depth[45:55, 45:55] = 0  # a hole at the centre pixel
+    box = np.array([[20.0, 10.0, 80.0, 90.0]])  # wider than the person: the box edges see the wall
+    assert box_depths(box, depth)[0] == 2000
+
+
+def brute_force_valid(centres, view, t):
+    """Every combination of >= 2 boxes from distinct views, all pairs within t (NumPy loops, the
+    reference)."""
+    out = set()
+    n = len(centres)
+    for m in range(2, len(set(view.tolist())) + 1):
+        for combo in itertools.combinations(range(n), m):
+            if len({view[i] for i in combo}) < m:
+                continue
+            d = [np.linalg.norm(centres[i] - centres[j]) for i, j in itertools.combinations(combo, 2)]
+            if max(d) <= t:
+                out.add((combo, round(float(np.mean(d)), 6)))
+    return out
+
+
+def test_valid_combinations_equal_brute_force():
+    rng = np.random.default_rng(0)
+    view = np.repeat(np.arange(4), [3, 2, 4, 3])
+    centres = rng.uniform(0, 1500, (len(view), 3))
+    centres[5] = np.nan  # a box without depth never matches
+    fast = {
+        (tuple(int(i) for i in row), round(float(d), 6))
+        for members, mean in valid_combinations(centres, view, 800.0)
+        for row, d in zip(members, mean, strict=True)
+    }
+    assert fast == brute_force_valid(centres, view, 800.0)
+    assert len(fast) > 10  # the scene is crowded enough to test something
+
+
+def test_greedy_prefers_larger_then_closer():
+    """A 3-view combination beats a closer 2-view one; among 2-view ones the closest wins."""
+    cams = ring_cameras(3)
+    people = np.array([[0.0, 0.0, 3000.0]])
+    views = render(cams, people)
+    centres, view = box_centres_3d([b for b, _, _ in views], [d for _, d, _ in views], cams)
+    combos = valid_combinations(centres, view, 750.0)
+    assert [m.shape[1] for m, _ in combos] == [2, 3]
+    groups = match_boxes([b for b, _, _ in views], [d for _, d, _ in views], cams)
+    assert len(groups) == 1 and groups[0].size == 3
+
+
+def test_bad_input_raises():
+    cams = ring_cameras(2)
+    with pytest.raises(ValueError, match="box lists"):
+        match_boxes([np.zeros((0, 4))] * 3, [np.zeros((H, W), np.uint16)] * 3, cams)
+    with pytest.raises(ValueError, match="depth"):
+        box_depths(np.zeros((1, 4)), np.zeros((2, 3, 4)))
