@@ -94,10 +94,20 @@ class ScenePipeline:
         config: matching settings.
     """
 
-    def __init__(self, pose, detector=None, config: PipelineConfig | None = None) -> None:
+    def __init__(
+        self, pose, detector=None, config: PipelineConfig | None = None, detector_meta: dict | None = None
+    ) -> None:
         self.pose = pose
         self.detector = detector
         self.config = config or PipelineConfig()
+        # The detector checkpoint's config.json: /model reports what the detector was trained on from it.
+        self.detector_meta = detector_meta or {}
+
+    @property
+    def modalities(self) -> tuple[str, ...]:
+        """The images the pose network reads: ("color", "depth"), ("color",) or ("depth",)."""
+        modality = self.pose.model.config.inputs.modality
+        return {"rgbd": ("color", "depth"), "rgb": ("color",), "depth": ("depth",)}[modality]
 
     @classmethod
     def from_checkpoints(
@@ -109,15 +119,15 @@ class ScenePipeline:
         config: PipelineConfig | None = None,
     ) -> ScenePipeline:
         """Load both models; ``None`` paths mean the weights shipped with the package."""
+        from detector.checkpoint import read_config
+        from detector.infer import DEFAULT_WEIGHTS, PersonDetector
         from posenet.infer import PoseEstimator
 
-        from detector.infer import PersonDetector
-
         pose = PoseEstimator.from_checkpoint(pose_checkpoint, device=device)
-        detector = (
-            PersonDetector.from_checkpoint(detector_checkpoint, device=device) if load_detector else None
-        )
-        return cls(pose, detector, config)
+        if not load_detector:
+            return cls(pose, None, config)
+        detector = PersonDetector.from_checkpoint(detector_checkpoint, device=device)
+        return cls(pose, detector, config, read_config(detector_checkpoint or DEFAULT_WEIGHTS))
 
     # ----------------------------------------------------------------------------------------- stages
     def _match(self, boxes: list[np.ndarray], views: list[FrameView]) -> list[list[int]]:
@@ -186,6 +196,9 @@ class ScenePipeline:
             confidence = np.asarray(prediction.confidence, dtype=np.float64)  # (P, J)
             for p, person in enumerate(persons):
                 person.joints, person.confidence = joints[p], confidence[p]
+            # A person whose boxes hold no valid depth has no lifted points: its joints mean nothing.
+            has_points = np.asarray(prediction.has_points, dtype=bool)  # (P,)
+            persons = [p for p, ok in zip(persons, has_points, strict=True) if ok]
         timings["pose"] = _ms(t0)
         return SceneResult("detector" if scores[0] is not None else "reference_boxes", persons, timings)
 

@@ -16,6 +16,7 @@ from starlette.formparsers import MultiPartException, MultiPartParser
 from posenet.skeleton import JOINTS
 from service.deps import Admitted, PipelineDep, SettingsDep, require_token
 from service.errors import UNSUPPORTED_MEDIA, InputError
+from service.model_info import model_info
 from service.pipeline import SceneResult
 from service.schemas import Error, Health, Joint, ModelInfo, Person, Ready, SceneOut, Support, Timings
 from service.settings import Settings
@@ -85,16 +86,7 @@ async def ready(request: Request, response: Response) -> Ready:
 
 @protected.get("/model", response_model=ModelInfo, summary="What the loaded models read and were trained on")
 async def model(pipeline: PipelineDep, settings: SettingsDep) -> ModelInfo:
-    pose, det = pipeline.pose, pipeline.detector
-    return ModelInfo(
-        joints=list(JOINTS),
-        modalities=list(pose.modalities),
-        input_size=pose.input_size,
-        pose_trained_on=pose.trained_on,
-        detector_trained_on=None if det is None else det.trained_on,
-        detector_loaded=det is not None,
-        device=settings.device,
-    )
+    return model_info(pipeline, settings.device)
 
 
 async def _read_form(request: Request, settings: Settings) -> tuple[bytes | None, dict[str, bytes]]:
@@ -175,7 +167,7 @@ async def post_scene(request: Request, pipeline: PipelineDep, settings: Settings
     if scene_text is None:
         raise InputError("missing form part 'scene' (the JSON with the views' cameras)")
     limits = Limits(settings.max_views, settings.max_image_pixels, settings.max_boxes_per_view)
-    need_color = "color" in pipeline.pose.modalities
+    need_color = "color" in pipeline.modalities
 
     def decode():
         return validate_scene(parse_scene(scene_text, limits), files, limits, need_color)

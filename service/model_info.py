@@ -1,0 +1,42 @@
+"""What ``GET /model`` says: the joints, what the pose network reads, its input size, and the training data.
+
+The training data is read from the checkpoints' own configs (the resolved config saved beside the weights), so
+the answer describes the weights actually loaded rather than what a deployment claims.
+"""
+
+from __future__ import annotations
+
+from posenet.skeleton import JOINTS
+from service.pipeline import ScenePipeline
+from service.schemas import ModelInfo
+
+# Config keys that say what a model saw in training, in the order they are reported.
+_DATA_KEYS = ("data", "dataset", "annotations", "days", "train_days", "holdout_day", "test_day", "subsample",
+              "epochs", "steps", "preset")  # fmt: skip
+
+
+def summarise_training(config: dict) -> str:
+    """A one-line account of the training data in a checkpoint config, from whichever known keys it holds."""
+    found = {}
+    for section in (config, config.get("train") or {}, config.get("data") or {}):
+        if isinstance(section, dict):
+            for key in _DATA_KEYS:
+                value = section.get(key)
+                if value is not None and not isinstance(value, dict) and key not in found:
+                    found[key] = value
+    if not found:
+        return "not recorded in the checkpoint's config"
+    return ", ".join(f"{key}={value}" for key, value in found.items())
+
+
+def model_info(pipeline: ScenePipeline, device: str) -> ModelInfo:
+    inputs = pipeline.pose.model.config.inputs
+    return ModelInfo(
+        joints=list(JOINTS),
+        modalities=list(pipeline.modalities),
+        input_size=inputs.network_size(False),
+        pose_trained_on=summarise_training(pipeline.pose.config),
+        detector_trained_on=None if pipeline.detector is None else summarise_training(pipeline.detector_meta),
+        detector_loaded=pipeline.detector is not None,
+        device=device,
+    )
