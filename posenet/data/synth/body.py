@@ -1,0 +1,140 @@
+"""Articulated bodies from smooth primitives, dressed in OR clothing.
+
+:func:`body_primitives` turns a full skeleton (:mod:`posenet.data.synth.skeleton_full`, z up, mm) into about
+twenty capsules and ellipsoids: head, cap, mask, neck, shoulders, chest, belly, pelvis, arms, gloved hands,
+thighs, shins and shoes, plus a gown skirt or a lead apron when the outfit has one. Thicknesses scale with the
+stature (trunk length); colours come from an :class:`Outfit` drawn by :func:`sample_outfit`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from posenet.data.synth.primitives import Material, Primitive, capsule, ellipsoid
+from posenet.data.synth.skeleton_full import LENGTHS, F, body_frame, unit
+
+# Linear-RGB reflectances. Scrubs and gowns: the blues and greens of OR textiles.
+SCRUB_COLOURS = np.array([
+    [0.10, 0.22, 0.45], [0.15, 0.35, 0.55], [0.25, 0.45, 0.60], [0.05, 0.12, 0.30],  # blues
+    [0.12, 0.38, 0.33], [0.20, 0.45, 0.40], [0.30, 0.50, 0.42], [0.08, 0.28, 0.22],  # greens
+    [0.35, 0.55, 0.65], [0.45, 0.60, 0.55],  # washed-out light blue / sage
+])  # fmt: skip
+SKIN_TONES = np.array([
+    [0.80, 0.60, 0.50], [0.70, 0.50, 0.38], [0.55, 0.38, 0.28], [0.40, 0.26, 0.18], [0.25, 0.16, 0.11],
+])  # fmt: skip
+GLOVE_COLOURS = np.array([[0.85, 0.78, 0.62], [0.90, 0.90, 0.88], [0.30, 0.45, 0.75], [0.75, 0.68, 0.55]])
+MASK_COLOURS = np.array([[0.55, 0.70, 0.85], [0.85, 0.88, 0.90], [0.45, 0.65, 0.55]])
+APRON_COLOURS = np.array([[0.25, 0.28, 0.35], [0.35, 0.30, 0.45], [0.15, 0.25, 0.45], [0.45, 0.45, 0.45]])
+SHOE_COLOURS = np.array([[0.85, 0.85, 0.85], [0.05, 0.05, 0.06], [0.20, 0.35, 0.60], [0.15, 0.45, 0.35]])
+
+
+@dataclass(frozen=True)
+class Outfit:
+    """What a person wears (materials) and which optional garments they have."""
+
+    top: Material
+    trousers: Material
+    cap: Material
+    mask: Material | None
+    skin: Material
+    hands: Material  # gloves, or skin
+    shoes: Material
+    gown: bool = False  # a long gown over the scrubs (the skirt covers the thighs)
+    apron: Material | None = None  # a lead apron in front of the trunk
+    bulk: float = 1.0  # how loose the clothing is (scales the thicknesses)
+
+
+def _cloth(rgb: np.ndarray, rng: np.random.Generator, texture: float = 0.05) -> Material:
+    shade = np.clip(rgb * rng.uniform(0.85, 1.15, 3), 0.02, 0.95)
+    return Material(tuple(float(c) for c in shade), ir_dropout=0.0, texture=texture)
+
+
+def sample_outfit(rng: np.random.Generator, role: str = "clinician") -> Outfit:
+    """A random OR outfit; ``role="patient"`` gives a light hospital gown and no cap or mask."""
+    skin_rgb = SKIN_TONES[rng.integers(len(SKIN_TONES))]
+    skin = Material(tuple(float(c) for c in np.clip(skin_rgb * rng.uniform(0.9, 1.1, 3), 0, 1)), texture=0.02)
+    if role == "patient":
+        gown = _cloth(np.array([0.6, 0.7, 0.8]), rng)
+        return Outfit(gown, gown, skin, None, skin, skin, skin, gown=False, bulk=1.0)
+    scrub = SCRUB_COLOURS[rng.integers(len(SCRUB_COLOURS))]
+    top = _cloth(scrub, rng)
+    trousers = top if rng.random() < 0.8 else _cloth(SCRUB_COLOURS[rng.integers(len(SCRUB_COLOURS))], rng)
+    cap_rgb = scrub if rng.random() < 0.5 else SCRUB_COLOURS[rng.integers(len(SCRUB_COLOURS))]
+    if rng.random() < 0.15:  # white or patterned disposable caps
+        cap_rgb = np.array([0.85, 0.85, 0.88])
+    gloves = rng.random() < 0.6
+    hands = _cloth(GLOVE_COLOURS[rng.integers(len(GLOVE_COLOURS))], rng, 0.02) if gloves else skin
+    mask = _cloth(MASK_COLOURS[rng.integers(len(MASK_COLOURS))], rng, 0.02) if rng.random() < 0.8 else None
+    shoes_rgb = SHOE_COLOURS[rng.integers(len(SHOE_COLOURS))]
+    shoes = Material(tuple(float(c) for c in shoes_rgb), ir_dropout=0.3 if shoes_rgb.max() < 0.1 else 0.0)
+    gown = rng.random() < 0.35
+    if gown:  # a surgical gown replaces the scrub top with a (usually darker or lighter) gown
+        top = _cloth(SCRUB_COLOURS[rng.integers(len(SCRUB_COLOURS))], rng)
+    apron = None
+    if rng.random() < 0.15:
+        apron = Material(tuple(float(c) for c in APRON_COLOURS[rng.integers(len(APRON_COLOURS))]), texture=0.02,
+                         specular=0.15)  # fmt: skip
+    return Outfit(top, trousers, _cloth(cap_rgb, rng), mask, skin, hands, shoes, gown, apron,
+                  bulk=float(rng.uniform(0.92, 1.15)))  # fmt: skip
+
+
+def body_primitives(points: np.ndarray, outfit: Outfit, owner: int) -> list[Primitive]:
+    """Primitives of one person from a full skeleton ``(NUM_FULL, 3)`` (z-up world frame, mm)."""
+    P = {name: points[i] for name, i in F.items()}
+    fwd, left, up = body_frame(points)
+    mid_sh = (P["left_shoulder"] + P["right_shoulder"]) / 2
+    mid_hip = (P["left_hip"] + P["right_hip"]) / 2
+    trunk = float(np.linalg.norm(mid_sh - mid_hip))
+    s = float(np.clip(trunk / LENGTHS["trunk"], 0.8, 1.25))
+    k = s * outfit.bulk  # clothing thickness
+    sh_w = float(np.linalg.norm(P["left_shoulder"] - P["right_shoulder"]))
+    hip_w = float(np.linalg.norm(P["left_hip"] - P["right_hip"]))
+    out: list[Primitive] = []
+
+    def cap_(a, b, r, mat):
+        out.append(capsule(a, b, r, owner, mat))
+
+    def ell(c, radii, axes, mat):
+        out.append(ellipsoid(c, radii, np.stack(axes, axis=1), owner, mat))
+
+    # Head: MVOR's head point sits at the face; the skull centre is a little further from the neck.
+    hd = unit(P["head"] - P["neck"])
+    hf = unit(fwd - hd * (fwd @ hd))
+    hl = np.cross(hd, hf)
+    head_c = P["neck"] + hd * 1.3 * np.linalg.norm(P["head"] - P["neck"]) - hf * 10 * s
+    ell(head_c, np.array([72, 90, 108]) * s, (hl, hf, hd), outfit.skin)
+    ell(head_c + hd * 30 * s - hf * 12 * s, np.array([80, 96, 84]) * s, (hl, hf, hd), outfit.cap)
+    if outfit.mask is not None:
+        ell(head_c + hf * 62 * s - hd * 38 * s, np.array([58, 36, 46]) * s, (hl, hf, hd), outfit.mask)
+    cap_(P["neck"] - up * 20 * s, head_c - hd * 40 * s, 50 * s, outfit.skin)
+    # Trunk: shoulder bar, chest, belly and pelvis ellipsoids in the trunk's frame.
+    cap_(P["left_shoulder"] - up * 15 * s, P["right_shoulder"] - up * 15 * s, 62 * k, outfit.top)
+    axes = (left, fwd, up)
+    ell(mid_hip + (mid_sh - mid_hip) * 0.68, np.array([sh_w / 2 + 40 * k, 115 * k, 0.42 * trunk]), axes, outfit.top)
+    ell(mid_hip + (mid_sh - mid_hip) * 0.32, np.array([hip_w / 2 + 35 * k, 110 * k, 0.36 * trunk]), axes, outfit.top)
+    ell(mid_hip - up * 15 * s, np.array([hip_w / 2 + 60 * k, 115 * k, 125 * s]), axes, outfit.trousers)
+    if outfit.apron is not None:
+        ell(mid_hip + (mid_sh - mid_hip) * 0.45 + fwd * 45 * k - up * 60 * s,
+            np.array([sh_w / 2 + 60 * k, 95 * k, 0.75 * trunk]), axes, outfit.apron)  # fmt: skip
+    # Arms and hands.
+    for side in ("left", "right"):
+        cap_(P[f"{side}_shoulder"], P[f"{side}_elbow"], 47 * k, outfit.top)
+        cap_(P[f"{side}_elbow"], P[f"{side}_wrist"], 38 * k, outfit.top if outfit.gown else outfit.skin)
+        hand_dir = unit(P[f"{side}_hand"] - P[f"{side}_wrist"])
+        cap_(P[f"{side}_wrist"] + hand_dir * 15 * s, P[f"{side}_hand"] + hand_dir * 20 * s, 34 * s, outfit.hands)
+    # Legs and shoes.
+    for side in ("left", "right"):
+        cap_(P[f"{side}_hip"], P[f"{side}_knee"], 72 * k, outfit.trousers)
+        cap_(P[f"{side}_knee"], P[f"{side}_ankle"], 55 * k, outfit.trousers)
+        cap_(P[f"{side}_ankle"] - up * 25 * s, P[f"{side}_toe"], 42 * s, outfit.shoes)
+    if outfit.gown:  # a gown skirt down to the knees
+        knees = (P["left_knee"] + P["right_knee"]) / 2
+        c = (mid_hip + knees) / 2
+        ax_up = unit(mid_hip - knees)
+        ax_l = unit(left - ax_up * (left @ ax_up))
+        ax_f = np.cross(ax_l, ax_up)
+        half = float(np.linalg.norm(mid_hip - knees)) / 2 + 60 * s
+        ell(c, np.array([hip_w / 2 + 110 * k, 150 * k, half]), (ax_l, ax_f, ax_up), outfit.top)
+    return out

@@ -1,0 +1,171 @@
+"""One synthetic frame: people and room in, per-view RGB-D images and annotations out.
+
+A :class:`Frame` is a world (z up, floor at 0, mm) made of :class:`Person` s and room primitives. :func:`render_frame`
+ray-casts it into every camera of a :class:`~posenet.data.synth.rig.Rig`, runs the sensor models and measures, per
+person and view, the visible pixels: their box (none when a person is hidden or almost hidden), the 2D keypoints with
+MVOR's visibility flags (2 visible, 1 occluded, 0 outside the image) and the visible pixel count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from posenet.data.synth.body import Outfit, body_primitives
+from posenet.data.synth.primitives import Primitive
+from posenet.data.synth.raster import Intrinsics, rasterize
+from posenet.data.synth.rig import Rig
+from posenet.data.synth.sensor import Lighting, shade_colour, simulate_depth
+from posenet.data.synth.skeleton_full import NUM_MVOR_POINTS
+
+NUM_JOINTS_2D = 10
+
+
+@dataclass
+class Person:
+    """A person in the world.
+
+    Attributes:
+        points: (NUM_FULL, 3) full skeleton, world frame, mm.
+        outfit: clothing and skin.
+        person_id: MVOR person id (>= 0 for people with a 3D annotation, -1 for box-only people such as the patient).
+        role: ``"clinician"`` or ``"patient"``.
+        extra: further primitives that belong to this person's silhouette (the patient's drape).
+    """
+
+    points: np.ndarray
+    outfit: Outfit
+    person_id: int
+    role: str = "clinician"
+    extra: list[Primitive] = field(default_factory=list)
+
+
+@dataclass
+class Frame:
+    """Everything in one synchronised multi-view frame.
+
+    Attributes:
+        hidden: (view, person index) pairs in which the person is not drawn at all (a last resort of the twin).
+    """
+
+    persons: list[Person]
+    room: list[Primitive]
+    lighting: Lighting
+    hidden: set[tuple[int, int]] = field(default_factory=set)
+
+
+@dataclass
+class VisibilityConfig:
+    min_pixels: int = 350  # fewer visible pixels than this at 640x480: no box ("almost hidden")
+    min_fraction: float = 0.12  # or less than this fraction of the person's unoccluded silhouette
+    kp_depth_tol: float = 120.0  # mm: a joint counts as visible if the surface there is this close in front
+
+
+@dataclass
+class ViewRender:
+    """One camera's output.
+
+    Attributes:
+        color: (H, W, 3) uint8 RGB; depth: (H, W) uint16 mm; ideal_depth: (H, W) float64 noise-free z (np.inf: none).
+        owner: (H, W) int32 person index of each pixel (negative: room).
+        boxes: per person, the xyxy box of its visible pixels (inclusive pixel indices), or None.
+        keypoints: per person, (10, 3) u, v, flag.
+        pixels: per person, the number of visible pixels.
+    """
+
+    color: np.ndarray
+    depth: np.ndarray
+    ideal_depth: np.ndarray
+    owner: np.ndarray
+    boxes: list[tuple[int, int, int, int] | None]
+    keypoints: list[np.ndarray]
+    pixels: list[int]
+
+
+def frame_primitives(frame: Frame) -> list[Primitive]:
+    """All primitives of a frame, the persons' owned by their index."""
+    prims = list(frame.room)
+    for i, person in enumerate(frame.persons):
+        prims += body_primitives(person.points, person.outfit, i)
+        prims += [replace(p, owner=i) for p in person.extra]
+    return prims
+
+
+def _material_tables(prims: list[Primitive]) -> tuple[np.ndarray, ...]:
+    albedo = np.array([p.material.albedo for p in prims], np.float32)
+    dropout = np.array([p.material.ir_dropout for p in prims], np.float32)
+    dropout = dropout + np.clip(0.08 - albedo.mean(1), 0, None) * 4  # very dark cloth absorbs the IR pattern
+    texture = np.array([p.material.texture for p in prims], np.float32)
+    specular = np.array([p.material.specular for p in prims], np.float32)
+    owner = np.array([p.owner for p in prims], np.int32)
+    return albedo, dropout, texture, specular, owner
+
+
+def unoccluded_pixels(prims_cam: list[Primitive], owner: int, K: Intrinsics, factor: int = 4) -> int:
+    """Pixels that person ``owner`` would cover with nothing in front, counted at 1/factor resolution."""
+    small = Intrinsics(K.fx / factor, K.fy / factor, (K.cx + 0.5) / factor - 0.5, (K.cy + 0.5) / factor - 0.5,
+                       K.width // factor, K.height // factor)  # fmt: skip
+    g = rasterize([p for p in prims_cam if p.owner == owner], small)
+    return int((g.prim >= 0).sum()) * factor * factor
+
+
+def render_view(frame: Frame, prims: list[Primitive], rig: Rig, v: int, rng: np.random.Generator,
+                vis: VisibilityConfig = VisibilityConfig()) -> ViewRender:  # fmt: skip
+    """Render view ``v`` of ``frame`` (``prims`` from :func:`frame_primitives`)."""
+    K = rig.intrinsics[v]
+    T = rig.world_to_cam()[v]
+    keep = [p for p in prims if (v, p.owner) not in frame.hidden]
+    cam = [p.to_camera(T) for p in keep]
+    g = rasterize(cam, K)
+    albedo, dropout, texture, specular, owners = _material_tables(keep)
+    hit = g.prim >= 0
+    idx = np.where(hit, g.prim, 0)
+    owner = np.where(hit, owners[idx], -3)
+    depth = simulate_depth(g, K, np.where(hit, dropout[idx], 0), rng)
+    color = shade_colour(g, K, albedo[idx], texture[idx], specular[idx], T, frame.lighting, rng)
+
+    n = len(frame.persons)
+    counts = np.bincount(owner[owner >= 0].ravel(), minlength=n)
+    boxes, keypoints = [], []
+    for i, person in enumerate(frame.persons):  # a handful of persons per frame
+        box = None
+        if counts[i] >= vis.min_pixels:
+            enough = counts[i] >= 8000 or counts[i] >= vis.min_fraction * unoccluded_pixels(cam, i, K)
+            if enough:
+                rows = np.flatnonzero((owner == i).any(axis=1))
+                cols = np.flatnonzero((owner == i).any(axis=0))
+                box = (int(cols[0]), int(rows[0]), int(cols[-1]), int(rows[-1]))
+        boxes.append(box)
+        keypoints.append(project_keypoints(person.points[:NUM_JOINTS_2D], T, K, owner, g.depth, i, vis))
+    return ViewRender(color, depth, g.depth, owner, boxes, keypoints, [int(c) for c in counts])
+
+
+def project_keypoints(points: np.ndarray, world_to_cam: np.ndarray, K: Intrinsics, owner: np.ndarray,
+                      zbuf: np.ndarray, index: int, vis: VisibilityConfig) -> np.ndarray:  # fmt: skip
+    """``(J, 3)`` u, v, flag of world joints ``points (J, 3)``: 2 visible, 1 occluded, 0 outside the image."""
+    pc = points @ world_to_cam[:3, :3].T + world_to_cam[:3, 3]
+    z = np.maximum(pc[:, 2], 1e-6)
+    u = K.fx * pc[:, 0] / z + K.cx
+    v = K.fy * pc[:, 1] / z + K.cy
+    ui, vi = np.round(u).astype(int), np.round(v).astype(int)
+    inside = (pc[:, 2] > 0) & (ui >= 0) & (ui < K.width) & (vi >= 0) & (vi < K.height)
+    uc, vc = np.clip(ui, 0, K.width - 1), np.clip(vi, 0, K.height - 1)
+    own = owner[vc, uc] == index
+    near = zbuf[vc, uc] > pc[:, 2] - vis.kp_depth_tol
+    flag = np.where(inside, np.where(own | near, 2, 1), 0)
+    out = np.stack([u, v, flag], axis=1)
+    out[flag == 0, :2] = 0  # MVOR writes (0, 0, 0) for joints it does not annotate
+    return out
+
+
+def render_frame(frame: Frame, rig: Rig, rng: np.random.Generator,
+                 vis: VisibilityConfig = VisibilityConfig()) -> list[ViewRender]:  # fmt: skip
+    """Render every view of the rig."""
+    prims = frame_primitives(frame)
+    return [render_view(frame, prims, rig, v, rng, vis) for v in range(rig.num_views)]
+
+
+def mvor_points(person: Person) -> np.ndarray:
+    """The person's 12 MVOR points ``(12, 3)`` (world frame)."""
+    return person.points[:NUM_MVOR_POINTS]

@@ -1,0 +1,158 @@
+"""RGB-D sensor models: what a Kinect-like camera makes of the ideal z-buffer and surface colours.
+
+Depth (uint16 mm, 0 = unknown), following the structured-light sensors MVOR was recorded with:
+  - axial noise that grows with the square of the distance (Khoshelham & Elberink 2012: ~1.5 mm at 1 m,
+    ~4 cm at 5 m), plus a smooth low-frequency wobble;
+  - disparity quantisation to 1/8 pixel with a 75 mm baseline, so depth steps grow as z^2 (~2 cm at 3 m);
+  - projector shadows: surfaces that the IR projector, beside the camera, cannot see return nothing;
+  - holes on depth edges (mixed pixels), on dark or shiny surfaces (per-material dropout) and random specks;
+  - a range limit, and the invalid band on the left border of registered Kinect depth.
+Colour (uint8 RGB): Lambertian shading from a key light above, a fill light and ambient, Blinn-Phong highlights on
+metal and screens, per-frame exposure and white balance, vignetting, fabric texture, sensor shot and read noise
+and a slight blur. Colour is deliberately harder than depth: exposure, white balance and noise change from frame
+to frame, while the depth of a surface does not.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from posenet.data.synth.raster import GBuffer, Intrinsics
+
+
+@dataclass
+class DepthSensorConfig:
+    noise_k: float = 1.5e-6  # sigma(z) = noise_k * z^2 mm (Khoshelham & Elberink 2012)
+    baseline: float = 75.0  # mm between IR projector and IR camera (Kinect v1)
+    disparity_step: float = 1 / 8  # px, Kinect v1 sub-pixel disparity resolution
+    min_range: float = 500.0
+    max_range: float = 6500.0
+    far_dropout_start: float = 4500.0  # beyond this, returns get sparse
+    edge_jump: float = 0.04  # relative depth jump that makes an edge pixel a hole
+    edge_dropout: float = 0.6
+    speckle: float = 0.004
+    left_band: int = 8  # invalid columns on the left border
+
+
+@dataclass
+class ColourSensorConfig:
+    read_noise: float = 2.0  # DN (0-255), sigma
+    shot_noise: float = 0.025  # relative, sigma at full scale
+    blur_sigma: float = 0.7
+    vignetting: float = 0.25
+
+
+def simulate_depth(g: GBuffer, K: Intrinsics, dropout: np.ndarray, rng: np.random.Generator,
+                   cfg: DepthSensorConfig = DepthSensorConfig()) -> np.ndarray:  # fmt: skip
+    """Sensor depth ``(H, W)`` uint16 mm from a G-buffer; ``dropout (H, W)`` is the per-pixel surface dropout."""
+    z = g.depth.copy()
+    H, W = z.shape
+    valid = np.isfinite(z) & (z > cfg.min_range) & (z < cfg.max_range)
+    z[~valid] = cfg.max_range
+    # Projector shadows: a z-buffer seen from the projector, one row at a time (same row, shifted column).
+    fb = K.fx * cfg.baseline
+    up = np.round(np.arange(W)[None, :] + fb / z).astype(np.int64)  # projector column of every pixel
+    up = np.clip(up, 0, W + int(fb / cfg.min_range) + 1)
+    Wp = W + int(fb / cfg.min_range) + 2
+    key = (np.arange(H)[:, None] * Wp + up).ravel()
+    proj = np.full(H * Wp, np.inf)
+    np.minimum.at(proj, key[valid.ravel()], z.ravel()[valid.ravel()])
+    shadow = z > proj[key].reshape(H, W) * 1.03
+    # Mixed pixels at depth discontinuities.
+    zmax = cv2.dilate(z.astype(np.float32), np.ones((3, 3), np.uint8))
+    zmin = cv2.erode(z.astype(np.float32), np.ones((3, 3), np.uint8))
+    edge = (zmax - zmin) > cfg.edge_jump * z
+    far = np.clip((z - cfg.far_dropout_start) / (cfg.max_range - cfg.far_dropout_start), 0, 1)
+    p_hole = edge * cfg.edge_dropout + dropout + cfg.speckle + far * 0.7  # one draw for every random cause
+    holes = shadow | (rng.random((H, W), dtype=np.float32) < p_hole)
+    # Noise: white, plus a smooth wobble of the same order (structured light correlates neighbouring pixels).
+    sigma = cfg.noise_k * z * z
+    wobble = cv2.resize(rng.normal(0, 1, (H // 16, W // 16)).astype(np.float32), (W, H), interpolation=cv2.INTER_CUBIC)
+    zn = z + sigma * (rng.standard_normal((H, W), dtype=np.float32) * 0.7 + wobble * 0.7)
+    # Disparity quantisation.
+    d = np.round(fb / zn / cfg.disparity_step) * cfg.disparity_step
+    zq = fb / np.maximum(d, 1e-6)
+    out = np.where(valid & ~holes, np.round(zq), 0)
+    out[:, : cfg.left_band] = 0
+    return np.clip(out, 0, 65535).astype(np.uint16)
+
+
+@dataclass
+class Lighting:
+    """Per-frame lighting (world frame, z up)."""
+
+    key_dir: np.ndarray  # (3,) unit vector from the surface toward the key light
+    key: float
+    fill: float
+    ambient: float
+    white_balance: np.ndarray  # (3,) RGB gains
+    exposure: float
+
+
+def sample_lighting(rng: np.random.Generator) -> Lighting:
+    tilt, az = rng.uniform(0, 0.6), rng.uniform(0, 2 * np.pi)
+    key_dir = np.array([np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), np.cos(tilt)])
+    wb = np.array([rng.uniform(0.85, 1.15), 1.0, rng.uniform(0.8, 1.2)])
+    return Lighting(key_dir, rng.uniform(0.5, 0.9), rng.uniform(0.15, 0.35), rng.uniform(0.15, 0.35), wb,
+                    rng.uniform(0.75, 1.3))  # fmt: skip
+
+
+# sRGB-like gamma as a lookup table (a power over every pixel costs more than the rest of the shading).
+_GAMMA = (np.linspace(0, 1, 4096, dtype=np.float32) ** (1 / 2.2)).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=16)
+def _view_geometry(fx, fy, cx, cy, W, H, vignetting) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel unit vectors toward the camera ``(3, H, W)`` and the vignetting gain ``(H, W, 1)``."""
+    du = (np.arange(W, dtype=np.float32) - cx) / fx
+    dv = (np.arange(H, dtype=np.float32) - cy) / fy
+    norm = np.sqrt(du[None, :] ** 2 + dv[:, None] ** 2 + 1)
+    view = np.stack([-du[None, :] / norm, -dv[:, None] / norm, -1 / norm])  # (3, H, W)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    r2 = ((xx - W / 2) ** 2 + (yy - H / 2) ** 2) / ((W / 2) ** 2 + (H / 2) ** 2)
+    return view.astype(np.float32), (1 - vignetting * r2).astype(np.float32)
+
+
+def shade_colour(g: GBuffer, K: Intrinsics, albedo: np.ndarray, texture: np.ndarray, specular: np.ndarray,
+                 world_to_cam: np.ndarray, light: Lighting, rng: np.random.Generator,
+                 cfg: ColourSensorConfig = ColourSensorConfig()) -> np.ndarray:  # fmt: skip
+    """Colour image ``(H, W, 3)`` uint8 RGB.
+
+    Args:
+        g: the view's G-buffer.
+        albedo: (H, W, 3) linear reflectance of the visible surface.
+        texture: (H, W) texture amplitude; specular: (H, W) highlight strength.
+        world_to_cam: (4, 4) T(world->cam), to bring the lights into the camera frame.
+    """
+    H, W = g.depth.shape
+    n = g.normal
+    l_key = (world_to_cam[:3, :3] @ light.key_dir).astype(np.float32)
+    view, vignette = _view_geometry(K.fx, K.fy, K.cx, K.cy, W, H, cfg.vignetting)
+    nx, ny, nz = n[..., 0], n[..., 1], n[..., 2]
+    diffuse = np.maximum(nx * l_key[0] + ny * l_key[1] + nz * l_key[2], 0)
+    n_dot_v = np.maximum(nx * view[0] + ny * view[1] + nz * view[2], 0)  # a fill light near the camera
+    shade = light.ambient + light.key * diffuse + light.fill * n_dot_v
+    # Fabric/grain texture: a fresh noise field at two scales.
+    grain = rng.standard_normal((H, W), dtype=np.float32)
+    blotch = cv2.resize(rng.standard_normal((H // 8, W // 8), dtype=np.float32), (W, H),
+                        interpolation=cv2.INTER_LINEAR)  # fmt: skip
+    shade *= 1 + texture * (0.6 * grain + 0.8 * blotch)
+    shade *= vignette * light.exposure
+    radiance = albedo * shade[..., None]
+    shiny = specular > 0
+    if shiny.any():  # Blinn-Phong highlights, only where a surface can shine
+        nv = n[shiny]
+        half = np.stack([view[i][shiny] for i in range(3)], 1) + l_key
+        half /= np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-6)
+        spec = specular[shiny] * np.maximum((nv * half).sum(1), 0) ** 40 * light.exposure
+        radiance[shiny] += spec[:, None]
+    radiance *= (light.white_balance).astype(np.float32)
+    img = _GAMMA[np.clip(radiance * (len(_GAMMA) - 1), 0, len(_GAMMA) - 1).astype(np.int32)]
+    img += rng.standard_normal(img.shape, dtype=np.float32) * np.sqrt((cfg.read_noise / 255) ** 2
+                                                                      + cfg.shot_noise**2 * img)  # fmt: skip
+    img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma)
+    return np.clip(img * 255 + 0.5, 0, 255).astype(np.uint8)
