@@ -5,7 +5,8 @@ Procedural scenes on a new random rig per day (4 days, 200 frames):
 Procedural scenes seen by MVOR's real rig:
     python -m posenet.data.synth --out data/synth_mvorrig --scenes 200 --rig mvor
 The MVOR twin (all 732 real frames, real rig, real 3D poses):
-    python -m posenet.data.synth --out data/mvor_twin --from-mvor ../shared/mvor/camma_mvor_2018.json --workers 2
+    python -m posenet.data.synth --out data/mvor_twin --from-mvor ../shared/mvor/camma_mvor_2018.json
+    --workers 2
 """
 
 from __future__ import annotations
@@ -24,26 +25,43 @@ DEFAULT_MVOR = Path(__file__).resolve().parents[3] / ".." / "shared" / "mvor" / 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m posenet.data.synth",
-        description="Render synthetic multi-view RGB-D operating-room frames (colour PNG, uint16 depth PNG in mm, "
-        "640x480) with MVOR-format annotations: person boxes of the visible pixels, 2D keypoints with visibility, "
-        "3D joints in camera 0's frame, recording days as the split unit. Prints a summary as JSON at the end.",
+        description="Render synthetic multi-view RGB-D operating-room frames (colour PNG, uint16 depth PNG "
+        "in mm, 640x480) with MVOR-format annotations: person boxes of the visible pixels, 2D keypoints with "
+        "visibility, 3D joints in camera 0's frame, recording days as the split unit. Prints a summary as "
+        "JSON at the end.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=__doc__,
     )
-    p.add_argument("--out", required=True, help="output folder (annotations.json and dayD/camC/{color,depth}/)")
+    p.add_argument(
+        "--out", required=True, help="output folder (annotations.json and dayD/camC/{color,depth}/)"
+    )
     src = p.add_argument_group("what to render (one of)")
-    src.add_argument("--from-mvor", metavar="ANNOTATIONS.json",
-                     help="MVOR twin: one frame per real MVOR frame, with its rig and 3D poses")  # fmt: skip
+    src.add_argument(
+        "--from-mvor",
+        metavar="ANNOTATIONS.json",
+        help="MVOR twin: one frame per real MVOR frame, with its rig and 3D poses",
+    )
     src.add_argument("--scenes", type=int, help="procedural: this many frames, split evenly over --days")
     proc = p.add_argument_group("procedural scenes")
-    proc.add_argument("--rig", choices=("random", "mvor"), default="random",
-                      help="random: a new ceiling-mounted 2-4 camera rig per day; mvor: MVOR's real three cameras")  # fmt: skip
+    proc.add_argument(
+        "--rig",
+        choices=("random", "mvor"),
+        default="random",
+        help="random: a new ceiling-mounted 2-4 camera rig per day; mvor: MVOR's real three cameras",
+    )
     proc.add_argument("--days", type=int, default=4, help="recording days (the cross-validation unit)")
-    proc.add_argument("--views", type=int, default=None, help="cameras per random rig (default: 2 to 4 per day)")
-    p.add_argument("--mvor-annotations", default=os.environ.get("MVOR_ANNOTATIONS", str(DEFAULT_MVOR)),
-                   help="MVOR json used by --rig mvor (default: $MVOR_ANNOTATIONS or ../shared/mvor/)")  # fmt: skip
+    proc.add_argument(
+        "--views", type=int, default=None, help="cameras per random rig (default: 2 to 4 per day)"
+    )
+    p.add_argument(
+        "--mvor-annotations",
+        default=os.environ.get("MVOR_ANNOTATIONS", str(DEFAULT_MVOR)),
+        help="MVOR json used by --rig mvor (default: $MVOR_ANNOTATIONS or ../shared/mvor/)",
+    )
     p.add_argument("--limit", type=int, default=None, help="twin: render only the first N MVOR frames")
-    p.add_argument("--seed", type=int, default=0, help="same seed, same bytes (per-frame seeds from seed/day/frame)")
+    p.add_argument(
+        "--seed", type=int, default=0, help="same seed, same bytes (per-frame seeds from seed/day/frame)"
+    )
     p.add_argument("--workers", type=int, default=1, help="frames rendered in parallel processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -53,11 +71,26 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
     if (args.from_mvor is None) == (args.scenes is None):
         raise SystemExit("error: give exactly one of --from-mvor ANNOTATIONS.json or --scenes N")
     if args.from_mvor is not None:
-        return SynthConfig(out=args.out, mode="twin", rig="mvor", seed=args.seed, workers=args.workers,
-                           mvor_annotations=args.from_mvor, limit=args.limit)  # fmt: skip
-    return SynthConfig(out=args.out, mode="procedural", scenes=args.scenes, days=args.days, rig=args.rig,
-                       views=args.views, seed=args.seed, workers=args.workers,
-                       mvor_annotations=args.mvor_annotations if args.rig == "mvor" else None)  # fmt: skip
+        return SynthConfig(
+            out=args.out,
+            mode="twin",
+            rig="mvor",
+            seed=args.seed,
+            workers=args.workers,
+            mvor_annotations=args.from_mvor,
+            limit=args.limit,
+        )
+    return SynthConfig(
+        out=args.out,
+        mode="procedural",
+        scenes=args.scenes,
+        days=args.days,
+        rig=args.rig,
+        views=args.views,
+        seed=args.seed,
+        workers=args.workers,
+        mvor_annotations=args.mvor_annotations if args.rig == "mvor" else None,
+    )
 
 
 def main(argv: list[str] | None = None) -> dict:

@@ -16,14 +16,29 @@ from posenet.data.synth.primitives import Material, Primitive, capsule, ellipsoi
 from posenet.data.synth.skeleton_full import LENGTHS, F, body_frame, unit
 
 # Linear-RGB reflectances. Scrubs and gowns: the blues and greens of OR textiles.
-SCRUB_COLOURS = np.array([
-    [0.10, 0.22, 0.45], [0.15, 0.35, 0.55], [0.25, 0.45, 0.60], [0.05, 0.12, 0.30],  # blues
-    [0.12, 0.38, 0.33], [0.20, 0.45, 0.40], [0.30, 0.50, 0.42], [0.08, 0.28, 0.22],  # greens
-    [0.35, 0.55, 0.65], [0.45, 0.60, 0.55],  # washed-out light blue / sage
-])  # fmt: skip
-SKIN_TONES = np.array([
-    [0.80, 0.60, 0.50], [0.70, 0.50, 0.38], [0.55, 0.38, 0.28], [0.40, 0.26, 0.18], [0.25, 0.16, 0.11],
-])  # fmt: skip
+SCRUB_COLOURS = np.array(
+    [
+        [0.10, 0.22, 0.45],
+        [0.15, 0.35, 0.55],
+        [0.25, 0.45, 0.60],
+        [0.05, 0.12, 0.30],  # blues
+        [0.12, 0.38, 0.33],
+        [0.20, 0.45, 0.40],
+        [0.30, 0.50, 0.42],
+        [0.08, 0.28, 0.22],  # greens
+        [0.35, 0.55, 0.65],
+        [0.45, 0.60, 0.55],  # washed-out light blue / sage
+    ]
+)
+SKIN_TONES = np.array(
+    [
+        [0.80, 0.60, 0.50],
+        [0.70, 0.50, 0.38],
+        [0.55, 0.38, 0.28],
+        [0.40, 0.26, 0.18],
+        [0.25, 0.16, 0.11],
+    ]
+)
 GLOVE_COLOURS = np.array([[0.85, 0.78, 0.62], [0.90, 0.90, 0.88], [0.30, 0.45, 0.75], [0.75, 0.68, 0.55]])
 MASK_COLOURS = np.array([[0.55, 0.70, 0.85], [0.85, 0.88, 0.90], [0.45, 0.65, 0.55]])
 APRON_COLOURS = np.array([[0.25, 0.28, 0.35], [0.35, 0.30, 0.45], [0.15, 0.25, 0.45], [0.45, 0.45, 0.45]])
@@ -74,10 +89,23 @@ def sample_outfit(rng: np.random.Generator, role: str = "clinician") -> Outfit:
         top = _cloth(SCRUB_COLOURS[rng.integers(len(SCRUB_COLOURS))], rng)
     apron = None
     if rng.random() < 0.15:
-        apron = Material(tuple(float(c) for c in APRON_COLOURS[rng.integers(len(APRON_COLOURS))]), texture=0.02,
-                         specular=0.15)  # fmt: skip
-    return Outfit(top, trousers, _cloth(cap_rgb, rng), mask, skin, hands, shoes, gown, apron,
-                  bulk=float(rng.uniform(0.92, 1.15)))  # fmt: skip
+        apron = Material(
+            tuple(float(c) for c in APRON_COLOURS[rng.integers(len(APRON_COLOURS))]),
+            texture=0.02,
+            specular=0.15,
+        )
+    return Outfit(
+        top,
+        trousers,
+        _cloth(cap_rgb, rng),
+        mask,
+        skin,
+        hands,
+        shoes,
+        gown,
+        apron,
+        bulk=float(rng.uniform(0.92, 1.15)),
+    )
 
 
 def body_primitives(points: np.ndarray, outfit: Outfit, owner: int) -> list[Primitive]:
@@ -112,18 +140,37 @@ def body_primitives(points: np.ndarray, outfit: Outfit, owner: int) -> list[Prim
     # Trunk: shoulder bar, chest, belly and pelvis ellipsoids in the trunk's frame.
     cap_(P["left_shoulder"] - up * 15 * s, P["right_shoulder"] - up * 15 * s, 62 * k, outfit.top)
     axes = (left, fwd, up)
-    ell(mid_hip + (mid_sh - mid_hip) * 0.68, np.array([sh_w / 2 + 40 * k, 115 * k, 0.42 * trunk]), axes, outfit.top)
-    ell(mid_hip + (mid_sh - mid_hip) * 0.32, np.array([hip_w / 2 + 35 * k, 110 * k, 0.36 * trunk]), axes, outfit.top)
+    ell(
+        mid_hip + (mid_sh - mid_hip) * 0.68,
+        np.array([sh_w / 2 + 40 * k, 115 * k, 0.42 * trunk]),
+        axes,
+        outfit.top,
+    )
+    ell(
+        mid_hip + (mid_sh - mid_hip) * 0.32,
+        np.array([hip_w / 2 + 35 * k, 110 * k, 0.36 * trunk]),
+        axes,
+        outfit.top,
+    )
     ell(mid_hip - up * 15 * s, np.array([hip_w / 2 + 60 * k, 115 * k, 125 * s]), axes, outfit.trousers)
     if outfit.apron is not None:
-        ell(mid_hip + (mid_sh - mid_hip) * 0.45 + fwd * 45 * k - up * 60 * s,
-            np.array([sh_w / 2 + 60 * k, 95 * k, 0.75 * trunk]), axes, outfit.apron)  # fmt: skip
+        ell(
+            mid_hip + (mid_sh - mid_hip) * 0.45 + fwd * 45 * k - up * 60 * s,
+            np.array([sh_w / 2 + 60 * k, 95 * k, 0.75 * trunk]),
+            axes,
+            outfit.apron,
+        )
     # Arms and hands.
     for side in ("left", "right"):
         cap_(P[f"{side}_shoulder"], P[f"{side}_elbow"], 47 * k, outfit.top)
         cap_(P[f"{side}_elbow"], P[f"{side}_wrist"], 38 * k, outfit.top if outfit.gown else outfit.skin)
         hand_dir = unit(P[f"{side}_hand"] - P[f"{side}_wrist"])
-        cap_(P[f"{side}_wrist"] + hand_dir * 15 * s, P[f"{side}_hand"] + hand_dir * 20 * s, 34 * s, outfit.hands)
+        cap_(
+            P[f"{side}_wrist"] + hand_dir * 15 * s,
+            P[f"{side}_hand"] + hand_dir * 20 * s,
+            34 * s,
+            outfit.hands,
+        )
     # Legs and shoes.
     for side in ("left", "right"):
         cap_(P[f"{side}_hip"], P[f"{side}_knee"], 72 * k, outfit.trousers)

@@ -1,7 +1,8 @@
 """Procedural poses: a sampler over joint angles for the postures seen around an operating table.
 
 A pose is built by forward kinematics in the person's own frame (x forward, y left, z up, feet on the floor at
-z = 0), then turned by a yaw and moved to a floor position. Postures: standing, bending over the table, reaching,
+z = 0), then turned by a yaw and moved to a floor position. Postures: standing, bending over the table,
+reaching,
 arms raised, arms crossed, turning; every angle is drawn inside a natural range. Lengths come from
 :mod:`posenet.data.synth.skeleton_full` scaled by the stature; the patient's lying pose is also here.
 """
@@ -153,12 +154,19 @@ def place(pts: np.ndarray, xy: np.ndarray, yaw: float, floor_z: float = 0.0) -> 
 
 
 def lying_pose(rng: np.random.Generator, stature: float | None = None) -> np.ndarray:
-    """A patient lying on the back along +x, head toward -x, hips at the origin ``(NUM_FULL, 3)``, body frame z up."""
+    """A patient lying on the back along +x, head toward -x, hips at the origin ``(NUM_FULL, 3)``, body
+    frame z up."""
     st = stature if stature is not None else float(np.clip(rng.normal(1700, 90), 1500, 1950))
-    p = PoseParams(stature=st, shoulder_flex=(rng.uniform(-0.1, 0.3), rng.uniform(-0.1, 0.3)),
-                   shoulder_abd=(rng.uniform(0.05, 0.4), rng.uniform(0.05, 0.4)),
-                   elbow_flex=(rng.uniform(0, 0.6), rng.uniform(0, 0.6)), head_pitch=0.0, head_yaw=0.0,
-                   knee_flex=(0.1, 0.1), stance=40.0)  # fmt: skip
+    p = PoseParams(
+        stature=st,
+        shoulder_flex=(rng.uniform(-0.1, 0.3), rng.uniform(-0.1, 0.3)),
+        shoulder_abd=(rng.uniform(0.05, 0.4), rng.uniform(0.05, 0.4)),
+        elbow_flex=(rng.uniform(0, 0.6), rng.uniform(0, 0.6)),
+        head_pitch=0.0,
+        head_yaw=0.0,
+        knee_flex=(0.1, 0.1),
+        stance=40.0,
+    )
     pts = build_pose(p)
     mid = (pts[F["left_hip"]] + pts[F["right_hip"]]) / 2
     pts = pts - mid

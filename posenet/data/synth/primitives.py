@@ -2,7 +2,8 @@
 
 Everything that the renderer draws is one of these shapes, so a frame is a short list of primitives and a
 view is rendered by solving one small quadratic (or slab test) per primitive on the pixels of its screen
-rectangle only. Units are mm. A :class:`Primitive` lives in the world (room) frame; :meth:`Primitive.to_camera`
+rectangle only. Units are mm. A :class:`Primitive` lives in the world (room) frame;
+:meth:`Primitive.to_camera`
 moves it into an OpenCV camera frame (see ``posenet.cameras``), where the ray through pixel (u, v) is
 ``t * ((u - cx) / fx, (v - cy) / fy, 1)``: the ray parameter ``t`` *is* the depth along z.
 """
@@ -94,7 +95,9 @@ def box(center, half_sizes, rotation=None, owner=OWNER_ROOM, material=None) -> P
 
 def shell(center, half_sizes, material=None) -> Primitive:
     """The room seen from inside: an axis-aligned box whose inner faces are floor, walls and ceiling."""
-    return Primitive(SHELL, np.asarray(center, float), np.eye(3), np.asarray(half_sizes, float), OWNER_SHELL, material)
+    return Primitive(
+        SHELL, np.asarray(center, float), np.eye(3), np.asarray(half_sizes, float), OWNER_SHELL, material
+    )
 
 
 # ------------------------------------------------------------------ intersections

@@ -41,7 +41,9 @@ def _table_spot(rng: np.random.Generator, room: Room) -> tuple[np.ndarray, float
     return pos, float(rng.uniform(0, 2 * np.pi)), False
 
 
-def procedural_frame(rng: np.random.Generator, patient_prob: float = 0.8, enclose: np.ndarray | None = None) -> Frame:
+def procedural_frame(
+    rng: np.random.Generator, patient_prob: float = 0.8, enclose: np.ndarray | None = None
+) -> Frame:
     """A random frame (world z up, floor at 0): clinicians with person ids 0..N-1, the patient with id -1.
 
     ``enclose (K, 3)``: points (the cameras) that the room's walls and ceiling must contain.
@@ -56,14 +58,21 @@ def procedural_frame(rng: np.random.Generator, patient_prob: float = 0.8, enclos
         pos, yaw, at_table = _table_spot(rng, room_probe)
         if all(np.linalg.norm(pos - p) > MIN_SPACING for p, _, _ in spots):
             spots.append((pos, yaw, at_table))
-    room = sample_room(rng, keep_clear=np.array([p for p, _, _ in spots]).reshape(-1, 2),
-                       table_center=room_probe.table_center, table_yaw=room_probe.table_yaw, enclose=enclose)  # fmt: skip
+    room = sample_room(
+        rng,
+        keep_clear=np.array([p for p, _, _ in spots]).reshape(-1, 2),
+        table_center=room_probe.table_center,
+        table_yaw=room_probe.table_yaw,
+        enclose=enclose,
+    )
     room.table_size = room_probe.table_size
     persons = []
     for pid, (pos, yaw, at_table) in enumerate(spots):
         posture = None
         if not at_table:
-            posture = str(rng.choice(["standing", "turning", "arms_crossed", "reaching"], p=[0.45, 0.25, 0.2, 0.1]))
+            posture = str(
+                rng.choice(["standing", "turning", "arms_crossed", "reaching"], p=[0.45, 0.25, 0.2, 0.1])
+            )
         _, params = sample_params(rng, posture)
         pts = place(build_pose(params), pos, yaw)
         persons.append(Person(pts, sample_outfit(rng), pid))

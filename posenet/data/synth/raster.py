@@ -56,8 +56,18 @@ def screen_rect(p: Primitive, K: Intrinsics) -> tuple[int, int, int, int] | None
             lo[:], hi[:] = -np.inf, np.inf
             break
         # x/z over the sphere lies between these extremes (both denominators cover either sign of x).
-        xs = [(c[0] - r) / (c[2] - r), (c[0] - r) / (c[2] + r), (c[0] + r) / (c[2] - r), (c[0] + r) / (c[2] + r)]
-        ys = [(c[1] - r) / (c[2] - r), (c[1] - r) / (c[2] + r), (c[1] + r) / (c[2] - r), (c[1] + r) / (c[2] + r)]
+        xs = [
+            (c[0] - r) / (c[2] - r),
+            (c[0] - r) / (c[2] + r),
+            (c[0] + r) / (c[2] - r),
+            (c[0] + r) / (c[2] + r),
+        ]
+        ys = [
+            (c[1] - r) / (c[2] - r),
+            (c[1] - r) / (c[2] + r),
+            (c[1] + r) / (c[2] - r),
+            (c[1] + r) / (c[2] + r),
+        ]
         lo = np.minimum(lo, [K.cx + K.fx * min(xs), K.cy + K.fy * min(ys)])
         hi = np.maximum(hi, [K.cx + K.fx * max(xs), K.cy + K.fy * max(ys)])
     if not seen:

@@ -1,8 +1,10 @@
 """Camera rigs: a random ceiling-mounted RGB-D rig around the table, or MVOR's real rig.
 
-A :class:`Rig` holds per camera the distortion-free intrinsics and the pose ``T(cam->world)`` (4x4, world z up,
+A :class:`Rig` holds per camera the distortion-free intrinsics and the pose ``T(cam->world)`` (4x4, world z
+up,
 floor at z = 0). The dataset's reference frame is camera 0's (``posenet.cameras``); MVOR's
-``firstCamToRoomRef`` is ``T(cam0->room)``, and for the twin the world is MVOR's room frame shifted so that the
+``firstCamToRoomRef`` is ``T(cam0->room)``, and for the twin the world is MVOR's room frame shifted so that
+the
 floor (found from the annotated poses) is at z = 0.
 """
 
@@ -33,7 +35,9 @@ class Rig:
 
     def __post_init__(self) -> None:
         if self.cam_to_world.shape != (len(self.intrinsics), 4, 4):
-            raise ValueError(f"cam_to_world must be ({len(self.intrinsics)}, 4, 4), got {self.cam_to_world.shape}")
+            raise ValueError(
+                f"cam_to_world must be ({len(self.intrinsics)}, 4, 4), got {self.cam_to_world.shape}"
+            )
 
     @property
     def num_views(self) -> int:
@@ -59,11 +63,17 @@ def look_at(position: np.ndarray, target: np.ndarray, roll: float = 0.0) -> np.n
     return T
 
 
-def random_rig(rng: np.random.Generator, table_center: np.ndarray, half_extent: np.ndarray,
-               num_views: int | None = None, serial_base: int = 0) -> Rig:  # fmt: skip
+def random_rig(
+    rng: np.random.Generator,
+    table_center: np.ndarray,
+    half_extent: np.ndarray,
+    num_views: int | None = None,
+    serial_base: int = 0,
+) -> Rig:
     """2 to 4 ceiling-mounted cameras spread around the table, 2.4-4.2 m from it, looking at it.
 
-    Cameras are spread in azimuth (at least 60 degrees apart) so every person is seen from several sides, as in
+    Cameras are spread in azimuth (at least 60 degrees apart) so every person is seen from several sides,
+    as in
     MVOR, and are kept inside the room's shell.
     """
     V = int(rng.integers(2, 5)) if num_views is None else num_views
@@ -87,7 +97,8 @@ def random_rig(rng: np.random.Generator, table_center: np.ndarray, half_extent: 
 
 
 def mvor_rig(cameras_info: dict, floor_z: float) -> Rig:
-    """MVOR's rig (distortion ignored, as MVOR's 3D annotations do) in its room frame with the floor at z = 0."""
+    """MVOR's rig (distortion ignored, as MVOR's 3D annotations do) in its room frame with the floor at z =
+    0."""
     params = cameras_info["camParams"]
     to_room = np.asarray(params["firstCamToRoomRef"], float).reshape(4, 4)
     shift = np.eye(4)

@@ -60,7 +60,9 @@ def room_shell(rng: np.random.Generator, center_xy: np.ndarray, half_extent: np.
     hx, hy, hz = half_extent
     walls = shell([center_xy[0], center_xy[1], hz], half_extent, _mat(WALLS[rng.integers(len(WALLS))], rng))
     floor_mat = _mat(FLOORS[rng.integers(len(FLOORS))], rng, texture=0.06, specular=0.1)
-    floor = box([center_xy[0], center_xy[1], -20.0], [hx - 1, hy - 1, 20.0], owner=OWNER_ROOM, material=floor_mat)
+    floor = box(
+        [center_xy[0], center_xy[1], -20.0], [hx - 1, hy - 1, 20.0], owner=OWNER_ROOM, material=floor_mat
+    )
     return [walls, floor]
 
 
@@ -77,8 +79,9 @@ def table(center: np.ndarray, yaw: float, size: tuple[float, float]) -> list[Pri
     return prims
 
 
-def drape_over(center: np.ndarray, yaw: float, length: float, width: float, height: float,
-               material: Material, owner: int) -> Primitive:  # fmt: skip
+def drape_over(
+    center: np.ndarray, yaw: float, length: float, width: float, height: float, material: Material, owner: int
+) -> Primitive:
     """A drape: a box lying over a patient, hanging ``height`` mm down the table's sides."""
     R = yaw_matrix(yaw)
     return box(center, [length / 2, width / 2, height / 2], R, owner=owner, material=material)
@@ -121,8 +124,14 @@ def c_arm(pos: np.ndarray, yaw: float) -> list[Primitive]:
     radius = 450.0
     arc = [centre + R @ np.array([radius * np.cos(a), 0, radius * np.sin(a)]) for a in ang]
     prims += [capsule(arc[i], arc[i + 1], 70, material=WHITE_PAINT) for i in range(len(arc) - 1)]
-    prims.append(capsule(pos + R @ np.array([300.0, 0, 900]), centre + R @ np.array([-radius, 0, 0]), 80,
-                         material=WHITE_PAINT))  # fmt: skip
+    prims.append(
+        capsule(
+            pos + R @ np.array([300.0, 0, 900]),
+            centre + R @ np.array([-radius, 0, 0]),
+            80,
+            material=WHITE_PAINT,
+        )
+    )
     prims.append(ellipsoid(arc[0], [200, 200, 120], R, material=GREY))  # detector
     return prims
 
@@ -147,8 +156,10 @@ def anaesthesia_machine(pos: np.ndarray, yaw: float) -> list[Primitive]:
 
 
 def iv_pole(pos: np.ndarray) -> list[Primitive]:
-    return [capsule(pos + [0, 0, 50], pos + [0, 0, 2000], 15, material=METAL),
-            ellipsoid(pos + [0, 80, 1800], [60, 30, 110], material=Material((0.8, 0.85, 0.9), texture=0.01))]
+    return [
+        capsule(pos + [0, 0, 50], pos + [0, 0, 2000], 15, material=METAL),
+        ellipsoid(pos + [0, 80, 1800], [60, 30, 110], material=Material((0.8, 0.85, 0.9), texture=0.01)),
+    ]
 
 
 def screen(pos: np.ndarray, yaw: float, rng: np.random.Generator, size=(900.0, 1800.0)) -> list[Primitive]:
@@ -159,15 +170,25 @@ def screen(pos: np.ndarray, yaw: float, rng: np.random.Generator, size=(900.0, 1
     return [box(pos + [0, 0, h / 2 + 100], [25, w / 2, h / 2], R, material=mat)]
 
 
-def sample_room(rng: np.random.Generator, keep_clear: np.ndarray | None = None, n_equipment: int | None = None,
-                table_center: np.ndarray | None = None, table_yaw: float | None = None,
-                enclose: np.ndarray | None = None) -> Room:  # fmt: skip
+def sample_room(
+    rng: np.random.Generator,
+    keep_clear: np.ndarray | None = None,
+    n_equipment: int | None = None,
+    table_center: np.ndarray | None = None,
+    table_yaw: float | None = None,
+    enclose: np.ndarray | None = None,
+) -> Room:
     """A random room around a table at the origin (or at ``table_center``).
 
-    ``keep_clear (N, 2)`` are floor positions (people) that floor-standing equipment must keep 600 mm away from;
+    ``keep_clear (N, 2)`` are floor positions (people) that floor-standing equipment must keep 600 mm away
+    from;
     ``enclose (K, 3)`` are points (cameras) that the shell must contain.
     """
-    tc = np.array([0.0, 0.0, rng.uniform(880, 1020)]) if table_center is None else np.asarray(table_center, float)
+    tc = (
+        np.array([0.0, 0.0, rng.uniform(880, 1020)])
+        if table_center is None
+        else np.asarray(table_center, float)
+    )
     yaw = rng.uniform(-0.1, 0.1) if table_yaw is None else float(table_yaw)
     size = (rng.uniform(1900, 2150), rng.uniform(520, 600))
     half = np.array([rng.uniform(3300, 4500), rng.uniform(3000, 4000), rng.uniform(1450, 1600)])
@@ -194,8 +215,11 @@ def sample_room(rng: np.random.Generator, keep_clear: np.ndarray | None = None, 
         p = np.array([*(tc[:2] + rng.uniform(-700, 700, 2)), rng.uniform(1900, 2250)])
         room.primitives += ceiling_lamp(p, ceiling, rng)
     n = int(rng.integers(3, 7)) if n_equipment is None else n_equipment
-    kinds = rng.choice(["monitor", "c_arm", "cart", "anaesthesia", "iv", "screen"], size=n,
-                       p=[0.25, 0.12, 0.28, 0.1, 0.13, 0.12])  # fmt: skip
+    kinds = rng.choice(
+        ["monitor", "c_arm", "cart", "anaesthesia", "iv", "screen"],
+        size=n,
+        p=[0.25, 0.12, 0.28, 0.1, 0.13, 0.12],
+    )
     for kind in kinds:
         face = rng.uniform(0, 2 * np.pi)
         if kind == "monitor":
@@ -219,10 +243,13 @@ def sample_room(rng: np.random.Generator, keep_clear: np.ndarray | None = None, 
     return room
 
 
-def patient_drape(room: Room, rng: np.random.Generator, owner: int) -> tuple[list[Primitive], list[Primitive]]:
+def patient_drape(
+    room: Room, rng: np.random.Generator, owner: int
+) -> tuple[list[Primitive], list[Primitive]]:
     """The drape over a patient on ``room``'s table, from the chest to beyond the feet.
 
-    Returns ``(sheet, hump)``: the sheet lying on the table and hanging down its sides (room furniture), and the
+    Returns ``(sheet, hump)``: the sheet lying on the table and hanging down its sides (room furniture),
+    and the
     rounded hump of the body under it, which belongs to the patient's silhouette (``owner``).
     """
     ax, _ = room.table_axes()
@@ -231,8 +258,15 @@ def patient_drape(room: Room, rng: np.random.Generator, owner: int) -> tuple[lis
     centre = room.table_center + ax * (L / 2 - length / 2 + 60)
     mat = _mat(DRAPES[rng.integers(len(DRAPES))], rng, texture=0.06)
     hang = rng.uniform(200, 320)
-    sheet = drape_over(centre + [0, 0, (25 - hang) / 2], room.table_yaw, length, W + rng.uniform(60, 140), hang + 25,
-                       mat, OWNER_ROOM)  # fmt: skip
+    sheet = drape_over(
+        centre + [0, 0, (25 - hang) / 2],
+        room.table_yaw,
+        length,
+        W + rng.uniform(60, 140),
+        hang + 25,
+        mat,
+        OWNER_ROOM,
+    )
     R = yaw_matrix(room.table_yaw)
     hump = ellipsoid(centre + [0, 0, 20], [length / 2 - 40, W / 2 - 40, rng.uniform(150, 210)], R, owner, mat)
     return [sheet], [hump]

@@ -1,8 +1,11 @@
 """One synthetic frame: people and room in, per-view RGB-D images and annotations out.
 
-A :class:`Frame` is a world (z up, floor at 0, mm) made of :class:`Person` s and room primitives. :func:`render_frame`
-ray-casts it into every camera of a :class:`~posenet.data.synth.rig.Rig`, runs the sensor models and measures, per
-person and view, the visible pixels: their box (none when a person is hidden or almost hidden), the 2D keypoints with
+A :class:`Frame` is a world (z up, floor at 0, mm) made of :class:`Person` s and room primitives.
+:func:`render_frame`
+ray-casts it into every camera of a :class:`~posenet.data.synth.rig.Rig`, runs the sensor models and
+measures, per
+person and view, the visible pixels: their box (none when a person is hidden or almost hidden), the 2D
+keypoints with
 MVOR's visibility flags (2 visible, 1 occluded, 0 outside the image) and the visible pixel count.
 """
 
@@ -29,7 +32,8 @@ class Person:
     Attributes:
         points: (NUM_FULL, 3) full skeleton, world frame, mm.
         outfit: clothing and skin.
-        person_id: MVOR person id (>= 0 for people with a 3D annotation, -1 for box-only people such as the patient).
+        person_id: MVOR person id (>= 0 for people with a 3D annotation, -1 for box-only people such as the
+        patient).
         role: ``"clinician"`` or ``"patient"``.
         extra: further primitives that belong to this person's silhouette (the patient's drape).
     """
@@ -46,7 +50,8 @@ class Frame:
     """Everything in one synchronised multi-view frame.
 
     Attributes:
-        hidden: (view, person index) pairs in which the person is not drawn at all (a last resort of the twin).
+        hidden: (view, person index) pairs in which the person is not drawn at all (a last resort of the
+        twin).
     """
 
     persons: list[Person]
@@ -67,7 +72,8 @@ class ViewRender:
     """One camera's output.
 
     Attributes:
-        color: (H, W, 3) uint8 RGB; depth: (H, W) uint16 mm; ideal_depth: (H, W) float64 noise-free z (np.inf: none).
+        color: (H, W, 3) uint8 RGB; depth: (H, W) uint16 mm; ideal_depth: (H, W) float64 noise-free z
+        (np.inf: none).
         owner: (H, W) int32 person index of each pixel (negative: room).
         boxes: per person, the xyxy box of its visible pixels (inclusive pixel indices), or None.
         keypoints: per person, (10, 3) u, v, flag.
@@ -104,15 +110,28 @@ def _material_tables(prims: list[Primitive]) -> tuple[np.ndarray, ...]:
 
 def unoccluded_pixels(prims_cam: list[Primitive], owner: int, K: Intrinsics, factor: int = 4) -> int:
     """Pixels that person ``owner`` would cover with nothing in front, counted at 1/factor resolution."""
-    small = Intrinsics(K.fx / factor, K.fy / factor, (K.cx + 0.5) / factor - 0.5, (K.cy + 0.5) / factor - 0.5,
-                       K.width // factor, K.height // factor)  # fmt: skip
+    small = Intrinsics(
+        K.fx / factor,
+        K.fy / factor,
+        (K.cx + 0.5) / factor - 0.5,
+        (K.cy + 0.5) / factor - 0.5,
+        K.width // factor,
+        K.height // factor,
+    )
     g = rasterize([p for p in prims_cam if p.owner == owner], small)
     return int((g.prim >= 0).sum()) * factor * factor
 
 
-def render_view(frame: Frame, prims: list[Primitive], rig: Rig, v: int, rng: np.random.Generator,
-                vis: VisibilityConfig = VisibilityConfig()) -> ViewRender:  # fmt: skip
+def render_view(
+    frame: Frame,
+    prims: list[Primitive],
+    rig: Rig,
+    v: int,
+    rng: np.random.Generator,
+    vis: VisibilityConfig | None = None,
+) -> ViewRender:
     """Render view ``v`` of ``frame`` (``prims`` from :func:`frame_primitives`)."""
+    vis = vis or VisibilityConfig()
     K = rig.intrinsics[v]
     T = rig.world_to_cam()[v]
     keep = [p for p in prims if (v, p.owner) not in frame.hidden]
@@ -141,8 +160,15 @@ def render_view(frame: Frame, prims: list[Primitive], rig: Rig, v: int, rng: np.
     return ViewRender(color, depth, g.depth, owner, boxes, keypoints, [int(c) for c in counts])
 
 
-def project_keypoints(points: np.ndarray, world_to_cam: np.ndarray, K: Intrinsics, owner: np.ndarray,
-                      zbuf: np.ndarray, index: int, vis: VisibilityConfig) -> np.ndarray:  # fmt: skip
+def project_keypoints(
+    points: np.ndarray,
+    world_to_cam: np.ndarray,
+    K: Intrinsics,
+    owner: np.ndarray,
+    zbuf: np.ndarray,
+    index: int,
+    vis: VisibilityConfig,
+) -> np.ndarray:
     """``(J, 3)`` u, v, flag of world joints ``points (J, 3)``: 2 visible, 1 occluded, 0 outside the image."""
     pc = points @ world_to_cam[:3, :3].T + world_to_cam[:3, 3]
     z = np.maximum(pc[:, 2], 1e-6)
@@ -159,8 +185,9 @@ def project_keypoints(points: np.ndarray, world_to_cam: np.ndarray, K: Intrinsic
     return out
 
 
-def render_frame(frame: Frame, rig: Rig, rng: np.random.Generator,
-                 vis: VisibilityConfig = VisibilityConfig()) -> list[ViewRender]:  # fmt: skip
+def render_frame(
+    frame: Frame, rig: Rig, rng: np.random.Generator, vis: VisibilityConfig | None = None
+) -> list[ViewRender]:
     """Render every view of the rig."""
     prims = frame_primitives(frame)
     return [render_view(frame, prims, rig, v, rng, vis) for v in range(rig.num_views)]

@@ -7,9 +7,12 @@ Depth (uint16 mm, 0 = unknown), following the structured-light sensors MVOR was 
   - projector shadows: surfaces that the IR projector, beside the camera, cannot see return nothing;
   - holes on depth edges (mixed pixels), on dark or shiny surfaces (per-material dropout) and random specks;
   - a range limit, and the invalid band on the left border of registered Kinect depth.
-Colour (uint8 RGB): Lambertian shading from a key light above, a fill light and ambient, Blinn-Phong highlights on
-metal and screens, per-frame exposure and white balance, vignetting, fabric texture, sensor shot and read noise
-and a slight blur. Colour is deliberately harder than depth: exposure, white balance and noise change from frame
+Colour (uint8 RGB): Lambertian shading from a key light above, a fill light and ambient, Blinn-Phong
+highlights on
+metal and screens, per-frame exposure and white balance, vignetting, fabric texture, sensor shot and read
+noise
+and a slight blur. Colour is deliberately harder than depth: exposure, white balance and noise change from
+frame
 to frame, while the depth of a surface does not.
 """
 
@@ -46,9 +49,16 @@ class ColourSensorConfig:
     vignetting: float = 0.25
 
 
-def simulate_depth(g: GBuffer, K: Intrinsics, dropout: np.ndarray, rng: np.random.Generator,
-                   cfg: DepthSensorConfig = DepthSensorConfig()) -> np.ndarray:  # fmt: skip
-    """Sensor depth ``(H, W)`` uint16 mm from a G-buffer; ``dropout (H, W)`` is the per-pixel surface dropout."""
+def simulate_depth(
+    g: GBuffer,
+    K: Intrinsics,
+    dropout: np.ndarray,
+    rng: np.random.Generator,
+    cfg: DepthSensorConfig | None = None,
+) -> np.ndarray:
+    """Sensor depth ``(H, W)`` uint16 mm from a G-buffer; ``dropout (H, W)`` is the per-pixel surface
+    dropout."""
+    cfg = cfg or DepthSensorConfig()
     z = g.depth.copy()
     H, W = z.shape
     valid = np.isfinite(z) & (z > cfg.min_range) & (z < cfg.max_range)
@@ -71,7 +81,9 @@ def simulate_depth(g: GBuffer, K: Intrinsics, dropout: np.ndarray, rng: np.rando
     holes = shadow | (rng.random((H, W), dtype=np.float32) < p_hole)
     # Noise: white, plus a smooth wobble of the same order (structured light correlates neighbouring pixels).
     sigma = cfg.noise_k * z * z
-    wobble = cv2.resize(rng.normal(0, 1, (H // 16, W // 16)).astype(np.float32), (W, H), interpolation=cv2.INTER_CUBIC)
+    wobble = cv2.resize(
+        rng.normal(0, 1, (H // 16, W // 16)).astype(np.float32), (W, H), interpolation=cv2.INTER_CUBIC
+    )
     zn = z + sigma * (rng.standard_normal((H, W), dtype=np.float32) * 0.7 + wobble * 0.7)
     # Disparity quantisation.
     d = np.round(fb / zn / cfg.disparity_step) * cfg.disparity_step
@@ -97,8 +109,14 @@ def sample_lighting(rng: np.random.Generator) -> Lighting:
     tilt, az = rng.uniform(0, 0.6), rng.uniform(0, 2 * np.pi)
     key_dir = np.array([np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), np.cos(tilt)])
     wb = np.array([rng.uniform(0.85, 1.15), 1.0, rng.uniform(0.8, 1.2)])
-    return Lighting(key_dir, rng.uniform(0.5, 0.9), rng.uniform(0.15, 0.35), rng.uniform(0.15, 0.35), wb,
-                    rng.uniform(0.75, 1.3))  # fmt: skip
+    return Lighting(
+        key_dir,
+        rng.uniform(0.5, 0.9),
+        rng.uniform(0.15, 0.35),
+        rng.uniform(0.15, 0.35),
+        wb,
+        rng.uniform(0.75, 1.3),
+    )
 
 
 # sRGB-like gamma as a lookup table (a power over every pixel costs more than the rest of the shading).
@@ -117,9 +135,17 @@ def _view_geometry(fx, fy, cx, cy, W, H, vignetting) -> tuple[np.ndarray, np.nda
     return view.astype(np.float32), (1 - vignetting * r2).astype(np.float32)
 
 
-def shade_colour(g: GBuffer, K: Intrinsics, albedo: np.ndarray, texture: np.ndarray, specular: np.ndarray,
-                 world_to_cam: np.ndarray, light: Lighting, rng: np.random.Generator,
-                 cfg: ColourSensorConfig = ColourSensorConfig()) -> np.ndarray:  # fmt: skip
+def shade_colour(
+    g: GBuffer,
+    K: Intrinsics,
+    albedo: np.ndarray,
+    texture: np.ndarray,
+    specular: np.ndarray,
+    world_to_cam: np.ndarray,
+    light: Lighting,
+    rng: np.random.Generator,
+    cfg: ColourSensorConfig | None = None,
+) -> np.ndarray:
     """Colour image ``(H, W, 3)`` uint8 RGB.
 
     Args:
@@ -128,6 +154,7 @@ def shade_colour(g: GBuffer, K: Intrinsics, albedo: np.ndarray, texture: np.ndar
         texture: (H, W) texture amplitude; specular: (H, W) highlight strength.
         world_to_cam: (4, 4) T(world->cam), to bring the lights into the camera frame.
     """
+    cfg = cfg or ColourSensorConfig()
     H, W = g.depth.shape
     n = g.normal
     l_key = (world_to_cam[:3, :3] @ light.key_dir).astype(np.float32)
@@ -138,8 +165,9 @@ def shade_colour(g: GBuffer, K: Intrinsics, albedo: np.ndarray, texture: np.ndar
     shade = light.ambient + light.key * diffuse + light.fill * n_dot_v
     # Fabric/grain texture: a fresh noise field at two scales.
     grain = rng.standard_normal((H, W), dtype=np.float32)
-    blotch = cv2.resize(rng.standard_normal((H // 8, W // 8), dtype=np.float32), (W, H),
-                        interpolation=cv2.INTER_LINEAR)  # fmt: skip
+    blotch = cv2.resize(
+        rng.standard_normal((H // 8, W // 8), dtype=np.float32), (W, H), interpolation=cv2.INTER_LINEAR
+    )
     shade *= 1 + texture * (0.6 * grain + 0.8 * blotch)
     shade *= vignette * light.exposure
     radiance = albedo * shade[..., None]
@@ -152,7 +180,8 @@ def shade_colour(g: GBuffer, K: Intrinsics, albedo: np.ndarray, texture: np.ndar
         radiance[shiny] += spec[:, None]
     radiance *= (light.white_balance).astype(np.float32)
     img = _GAMMA[np.clip(radiance * (len(_GAMMA) - 1), 0, len(_GAMMA) - 1).astype(np.int32)]
-    img += rng.standard_normal(img.shape, dtype=np.float32) * np.sqrt((cfg.read_noise / 255) ** 2
-                                                                      + cfg.shot_noise**2 * img)  # fmt: skip
+    img += rng.standard_normal(img.shape, dtype=np.float32) * np.sqrt(
+        (cfg.read_noise / 255) ** 2 + cfg.shot_noise**2 * img
+    )
     img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma)
     return np.clip(img * 255 + 0.5, 0, 255).astype(np.uint8)

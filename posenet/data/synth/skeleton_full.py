@@ -1,9 +1,11 @@
 """The renderer's full-body skeleton: MVOR's 12 annotated points plus knees, ankles and toes.
 
-The first 12 points are exactly MVOR's ``keypoints3D`` order (the 10 joints of ``posenet.skeleton`` and the two
+The first 12 points are exactly MVOR's ``keypoints3D`` order (the 10 joints of ``posenet.skeleton`` and the
+two
 hand points about 9 cm beyond the wrists), so a rendered body's annotation is ``points[:12]``. Segment lengths
 are MVOR's medians (measured on ``camma_mvor_2018.json``, whose shoulders, elbows and wrists sit inside the
-body, so its arms are shorter than textbook anthropometry) for a person of :data:`REF_STATURE`; the legs, which
+body, so its arms are shorter than textbook anthropometry) for a person of :data:`REF_STATURE`; the legs,
+which
 MVOR does not annotate, follow Winter's anthropometric table (hip 0.530, knee 0.285, ankle 0.039 of stature).
 """
 
@@ -12,10 +14,25 @@ from __future__ import annotations
 import numpy as np
 
 FULL_JOINTS: tuple[str, ...] = (
-    "head", "neck", "left_shoulder", "right_shoulder", "left_hip", "right_hip", "left_elbow", "right_elbow",
-    "left_wrist", "right_wrist", "left_hand", "right_hand",
-    "left_knee", "right_knee", "left_ankle", "right_ankle", "left_toe", "right_toe",
-)  # fmt: skip
+    "head",
+    "neck",
+    "left_shoulder",
+    "right_shoulder",
+    "left_hip",
+    "right_hip",
+    "left_elbow",
+    "right_elbow",
+    "left_wrist",
+    "right_wrist",
+    "left_hand",
+    "right_hand",
+    "left_knee",
+    "right_knee",
+    "left_ankle",
+    "right_ankle",
+    "left_toe",
+    "right_toe",
+)
 NUM_FULL = len(FULL_JOINTS)
 F = {name: i for i, name in enumerate(FULL_JOINTS)}
 NUM_MVOR_POINTS = 12  # the annotated prefix
@@ -62,10 +79,13 @@ def body_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def complete_legs(points12: np.ndarray, floor_z: float = 0.0) -> np.ndarray:
-    """Full skeleton ``(NUM_FULL, 3)`` from MVOR's 12 points ``(12, 3)`` in a z-up frame with the floor at ``floor_z``.
+    """Full skeleton ``(NUM_FULL, 3)`` from MVOR's 12 points ``(12, 3)`` in a z-up frame with the floor at
+    ``floor_z``.
 
-    The ankles go straight below the hips (slightly forward and outward), at ankle height above the floor; the knees
-    follow by two-link inverse kinematics, bending forward. Leg lengths scale with the trunk; legs too short for
+    The ankles go straight below the hips (slightly forward and outward), at ankle height above the floor;
+    the knees
+    follow by two-link inverse kinematics, bending forward. Leg lengths scale with the trunk; legs too
+    short for
     the floor are stretched by at most 15 %, then the feet hover.
     """
     if points12.shape != (NUM_MVOR_POINTS, 3):

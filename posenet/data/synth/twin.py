@@ -5,12 +5,15 @@ completed down to the floor, see :func:`~posenet.data.synth.skeleton_full.comple
 and draped patient of that day where MVOR has a patient box, and a room around them. "Up" and the floor come
 from MVOR's ``firstCamToRoomRef`` (room z is up; the floor height is estimated from the upright poses).
 
-The table (and the patient on it) is not annotated in MVOR, so it is fitted per day: the pose (x, y, yaw, height)
+The table (and the patient on it) is not annotated in MVOR, so it is fitted per day: the pose (x, y, yaw,
+height)
 of a patient-sized cuboid whose projected boxes best match MVOR's patient boxes (mean IoU, random search).
 
-Where MVOR has no box for an annotated person in a view, that person must be hidden there, as in the real images:
+Where MVOR has no box for an annotated person in a view, that person must be hidden there, as in the real
+images:
 a boom-mounted monitor is placed on the ray between that camera and the person, sized to cover the person's
-silhouette, at the distance (among a few candidates) that least covers people who must stay visible in any view.
+silhouette, at the distance (among a few candidates) that least covers people who must stay visible in any
+view.
 Only if every candidate would hide someone else is the person left undrawn in that view (``Frame.hidden``);
 :func:`twin_frame` reports how often each remedy was used.
 """
@@ -72,7 +75,8 @@ def _xyxy(b) -> np.ndarray:
 
 
 def load_twin(ann: dict) -> TwinContext:
-    """Read an MVOR annotation dict into per-frame twin descriptions, the world frame and the fitted tables."""
+    """Read an MVOR annotation dict into per-frame twin descriptions, the world frame and the fitted
+    tables."""
     params = ann["cameras_info"]["camParams"]
     to_room = np.asarray(params["firstCamToRoomRef"], float).reshape(4, 4)
     P = np.array([p["keypoints3D"] for p in ann["annotations3D"]], float).reshape(-1, 12, 4)[..., :3]
@@ -110,8 +114,14 @@ def load_twin(ann: dict) -> TwinContext:
                     roles[a["person_id"]] = a["person_role"]
                 elif a["person_role"] == "patient":
                     patient[v] = _xyxy(a["bbox"])
-        poses = [(p["person_id"], np.asarray(p["keypoints3D"], float).reshape(12, 4), roles.get(p["person_id"],
-                  "clinician")) for p in poses_by_mv.get(mv["id"], [])]  # fmt: skip
+        poses = [
+            (
+                p["person_id"],
+                np.asarray(p["keypoints3D"], float).reshape(12, 4),
+                roles.get(p["person_id"], "clinician"),
+            )
+            for p in poses_by_mv.get(mv["id"], [])
+        ]
         frames.append(TwinFrameInfo(day, frame_no, image_ids, poses, boxes, patient))
     ctx = TwinContext(rig, floor_z, cam0_to_world, {}, frames)
     for day in sorted({f.day for f in frames}):
@@ -156,9 +166,15 @@ def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return inter / np.maximum(area(a) + area(b) - inter, 1e-9)
 
 
-def fit_table(rig: Rig, observations: list[tuple[int, np.ndarray]], rng: np.random.Generator,
-              rounds: int = 4, samples: int = 3000) -> tuple[tuple[np.ndarray, float], float]:  # fmt: skip
-    """The table pose ((top centre (3,), yaw), mean IoU) that best explains the patient boxes ``[(view, xyxy)]``."""
+def fit_table(
+    rig: Rig,
+    observations: list[tuple[int, np.ndarray]],
+    rng: np.random.Generator,
+    rounds: int = 4,
+    samples: int = 3000,
+) -> tuple[tuple[np.ndarray, float], float]:
+    """The table pose ((top centre (3,), yaw), mean IoU) that best explains the patient boxes ``[(view,
+    xyxy)]``."""
     if not observations:
         return (np.array([0.0, 1000.0, 950.0]), 0.0), 0.0
     views = np.array([v for v, _ in observations])
@@ -185,14 +201,22 @@ def fit_table(rig: Rig, observations: list[tuple[int, np.ndarray]], rng: np.rand
 # ------------------------------------------------------------------ occluders
 
 
-def _silhouettes(frame: Frame, rig: Rig, factor: int = 4) -> dict[tuple[int, int], tuple[np.ndarray, float, int]]:
+def _silhouettes(
+    frame: Frame, rig: Rig, factor: int = 4
+) -> dict[tuple[int, int], tuple[np.ndarray, float, int]]:
     """Per (view, person): unoccluded silhouette box (xyxy, full-res pixels), nearest depth, pixel count."""
     prims = frame_primitives(frame)
     T = rig.world_to_cam()
     out = {}
     for v, K in enumerate(rig.intrinsics):
-        small = Intrinsics(K.fx / factor, K.fy / factor, (K.cx + 0.5) / factor - 0.5, (K.cy + 0.5) / factor - 0.5,
-                           K.width // factor, K.height // factor)  # fmt: skip
+        small = Intrinsics(
+            K.fx / factor,
+            K.fy / factor,
+            (K.cx + 0.5) / factor - 0.5,
+            (K.cy + 0.5) / factor - 0.5,
+            K.width // factor,
+            K.height // factor,
+        )
         for i in range(len(frame.persons)):
             g = rasterize([p.to_camera(T[v]) for p in prims if p.owner == i], small)
             hit = g.prim >= 0
@@ -204,7 +228,9 @@ def _silhouettes(frame: Frame, rig: Rig, factor: int = 4) -> dict[tuple[int, int
     return out
 
 
-def _monitor_covering(rig: Rig, v: int, rect: np.ndarray, z: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _monitor_covering(
+    rig: Rig, v: int, rect: np.ndarray, z: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A camera-facing panel at depth ``z`` in camera ``v`` that exactly covers pixel rectangle ``rect``.
 
     Returns (centre (3,), half sizes (3,), rotation (3, 3)) in the world frame.
@@ -217,8 +243,14 @@ def _monitor_covering(rig: Rig, v: int, rect: np.ndarray, z: float) -> tuple[np.
     return T[:3, :3] @ centre_cam + T[:3, 3], half, T[:3, :3]
 
 
-def add_occluders(frame: Frame, rig: Rig, must_hide: set[tuple[int, int]], must_show: set[tuple[int, int]],
-                  ceiling: float, min_pixels: int = 350) -> dict[str, int]:  # fmt: skip
+def add_occluders(
+    frame: Frame,
+    rig: Rig,
+    must_hide: set[tuple[int, int]],
+    must_show: set[tuple[int, int]],
+    ceiling: float,
+    min_pixels: int = 350,
+) -> dict[str, int]:
     """Hide ``must_hide`` (view, person) pairs behind monitors; returns counts of each remedy."""
     stats = {"occluder": 0, "not_drawn": 0, "out_of_view": 0}
     if not must_hide:
@@ -259,7 +291,9 @@ def add_occluders(frame: Frame, rig: Rig, must_hide: set[tuple[int, int]], must_
         centre, half, R = best
         frame.room.append(box(centre, half, R, owner=OWNER_ROOM, material=DARK))
         top = centre + R[:, 1] * -half[1]
-        frame.room.append(capsule(top, [top[0], top[1], ceiling], 25, owner=OWNER_ROOM, material=MONITOR_BACK))
+        frame.room.append(
+            capsule(top, [top[0], top[1], ceiling], 25, owner=OWNER_ROOM, material=MONITOR_BACK)
+        )
         stats["occluder"] += 1
     return stats
 
@@ -274,24 +308,32 @@ def _overlap(a: np.ndarray, b: np.ndarray) -> float:
 # ------------------------------------------------------------------ frames
 
 
-def twin_frame(ctx: TwinContext, info: TwinFrameInfo, rng: np.random.Generator) -> tuple[Frame, dict[str, int]]:
+def twin_frame(
+    ctx: TwinContext, info: TwinFrameInfo, rng: np.random.Generator
+) -> tuple[Frame, dict[str, int]]:
     """The twin of one MVOR frame, and how its hidden people were hidden."""
     T = ctx.cam0_to_world
     persons = []
     for pid, kp, role in info.poses:
         pts12 = kp[:, :3] @ T[:3, :3].T + T[:3, 3]
-        persons.append(Person(complete_legs(pts12), sample_outfit(rng), pid, role if role == "patient" else "clinician"))
+        persons.append(
+            Person(complete_legs(pts12), sample_outfit(rng), pid, role if role == "patient" else "clinician")
+        )
     centre, yaw = ctx.tables[info.day]
     # The cameras hang on the walls and ceiling: the room is the smallest box around them, plus a margin.
     cams = ctx.rig.cam_to_world[:, :3, 3]
     room_xy = (cams[:, :2].min(0) + cams[:, :2].max(0)) / 2
-    half = np.array([*(np.abs(cams[:, :2] - room_xy).max(0) + rng.uniform(250, 600, 2)), cams[:, 2].max() / 2 + 150])
+    half = np.array(
+        [*(np.abs(cams[:, :2] - room_xy).max(0) + rng.uniform(250, 600, 2)), cams[:, 2].max() / 2 + 150]
+    )
     room = Room(table_center=centre, table_yaw=yaw, table_size=(2000.0, 560.0), half_extent=half)
     room.primitives += room_shell(rng, room_xy, half)
     room.primitives += table(centre, yaw, room.table_size)
     ceiling = 2 * half[2]
     if rng.random() < 0.5:
-        room.primitives += ceiling_lamp(np.array([*(centre[:2] + rng.uniform(-400, 400, 2)), 2250.0]), ceiling, rng)
+        room.primitives += ceiling_lamp(
+            np.array([*(centre[:2] + rng.uniform(-400, 400, 2)), 2250.0]), ceiling, rng
+        )
     has_patient_pose = any(p.role == "patient" for p in persons)
     if any(b is not None for b in info.patient_boxes) and not has_patient_pose:
         R = yaw_matrix(yaw)

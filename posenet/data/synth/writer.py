@@ -1,17 +1,20 @@
 """Render a whole dataset in MVOR's layout and schema, frame by frame, in parallel.
 
 Layout: ``OUT/annotations.json`` and ``OUT/dayD/camC/{color,depth}/NNNNNN.png`` (8-bit RGB; uint16 mm, 0 =
-unknown), 640x480. The json has exactly the real file's keys (``multiview_images``, ``images``, ``annotations``,
+unknown), 640x480. The json has exactly the real file's keys (``multiview_images``, ``images``,
+``annotations``,
 ``annotations3D``, ``cameras_info``, ``categories``, ``dataset_info``, ``info``, ``licenses``), with
 ``dataset_info.synthetic`` holding the generator settings. Image ids follow MVOR's pattern: ``D CCC FFFFFFF``
 (day, camera, frame number), e.g. 20030000235.
 
-Cameras: ``cam_id`` C is ``cameras_info`` intrinsics index C - 1, as in MVOR. With ``--rig mvor`` every day uses
+Cameras: ``cam_id`` C is ``cameras_info`` intrinsics index C - 1, as in MVOR. With ``--rig mvor`` every day
+uses
 MVOR's three cameras. With ``--rig random`` each day gets its own new rig, so cameras are numbered across days
 (day 1 has cams 1..V1, day 2 the next ones, ...), and all extrinsics, like the 3D joints, are expressed in the
 frame of the dataset's camera 0 (the first camera of day 1), which is what MVOR's format requires of them.
 
-Every frame is rendered from its own generator, seeded by (seed, day, frame number), so the output does not depend on
+Every frame is rendered from its own generator, seeded by (seed, day, frame number), so the output does not
+depend on
 the number of workers or on which frames are rendered.
 """
 
@@ -35,13 +38,26 @@ from posenet.data.synth.twin import TwinContext, load_twin, twin_frame
 
 VERSION = "1.0"
 MODE_CODES = {"procedural": 1, "twin": 2}
-CATEGORIES = [{
-    "skeleton": [[1, 2], [2, 4], [4, 8], [4, 6], [8, 10], [2, 3], [3, 5], [3, 7], [7, 9], [5, 6]],
-    "name": "person", "id": "1",
-    "keypoints": ["head", "neck", "left_shoulder", "right_shoulder", "left_hip", "right_hip", "left_elbow",
-                  "right_elbow", "left_wrist", "right_wrist"],
-    "supercategory": "person",
-}]  # fmt: skip
+CATEGORIES = [
+    {
+        "skeleton": [[1, 2], [2, 4], [4, 8], [4, 6], [8, 10], [2, 3], [3, 5], [3, 7], [7, 9], [5, 6]],
+        "name": "person",
+        "id": "1",
+        "keypoints": [
+            "head",
+            "neck",
+            "left_shoulder",
+            "right_shoulder",
+            "left_hip",
+            "right_hip",
+            "left_elbow",
+            "right_elbow",
+            "left_wrist",
+            "right_wrist",
+        ],
+        "supercategory": "person",
+    }
+]
 
 
 @dataclass
@@ -112,13 +128,15 @@ def build_rigs(cfg: SynthConfig, twin: TwinContext | None) -> DatasetRigs:
         for d in days:
             if cfg.mode == "twin":
                 rigs[d] = twin.rig
-            else:  # procedural scenes are built around a table at the origin: use that day's fitted table frame
+            else:  # procedural scenes are built around a table at the origin: use the day's fitted table
                 (c, yaw) = twin.tables.get(d, twin.tables[min(twin.tables)])
                 table = np.eye(4)
                 cs, sn = np.cos(yaw), np.sin(yaw)
                 table[:3, :3] = [[cs, -sn, 0], [sn, cs, 0], [0, 0, 1]]
                 table[:2, 3] = c[:2]
-                rigs[d] = Rig(twin.rig.intrinsics, np.linalg.inv(table) @ twin.rig.cam_to_world, twin.rig.serials)
+                rigs[d] = Rig(
+                    twin.rig.intrinsics, np.linalg.inv(table) @ twin.rig.cam_to_world, twin.rig.serials
+                )
             numbers[d] = list(range(1, rigs[d].num_views + 1))
             ref[d] = rigs[d].cam_to_world[0]
         return DatasetRigs(rigs, numbers, ref)
@@ -127,8 +145,9 @@ def build_rigs(cfg: SynthConfig, twin: TwinContext | None) -> DatasetRigs:
     n = 0
     for d in days:
         rng = frame_rng(cfg.seed, cfg.mode, d, 0, purpose=1)
-        rigs[d] = random_rig(rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), cfg.views,
-                             serial_base=n)  # fmt: skip
+        rigs[d] = random_rig(
+            rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), cfg.views, serial_base=n
+        )
         numbers[d] = list(range(n + 1, n + 1 + rigs[d].num_views))
         n += rigs[d].num_views
     first = rigs[days[0]].cam_to_world[0]
@@ -149,14 +168,28 @@ def cameras_info(rigs: DatasetRigs) -> dict:
                 continue
             seen.add(num)
             K = rig.intrinsics[k]
-            intr.append({"serialnumber": rig.serials[k], "skew_value": 0, "distortion": [0.0] * 5,
-                         "principalpoint": [K.cx, K.cy], "focallength": [K.fx, K.fy],
-                         "imagesize": [K.width, K.height]})  # fmt: skip
+            intr.append(
+                {
+                    "serialnumber": rig.serials[k],
+                    "skew_value": 0,
+                    "distortion": [0.0] * 5,
+                    "principalpoint": [K.cx, K.cy],
+                    "focallength": [K.fx, K.fy],
+                    "imagesize": [K.width, K.height],
+                }
+            )
             ext.append((ref_inv @ rig.cam_to_world[k]).ravel().tolist())
             ids.append(rig.serials[k])
     first = min(rigs.rigs)
-    return {"camParams": {"firstCamToRoomRef": rigs.ref_to_world[first].ravel().tolist(), "intrinsics": intr,
-                          "ids": ids, "extrinsics": ext}, "date_identifier": "synthetic"}  # fmt: skip
+    return {
+        "camParams": {
+            "firstCamToRoomRef": rigs.ref_to_world[first].ravel().tolist(),
+            "intrinsics": intr,
+            "ids": ids,
+            "extrinsics": ext,
+        },
+        "date_identifier": "synthetic",
+    }
 
 
 # ------------------------------------------------------------------ one frame
@@ -169,8 +202,9 @@ def _init_worker(cfg: SynthConfig, rigs: DatasetRigs, twin: TwinContext | None) 
     cv2.setNumThreads(1)  # parallelism comes from the frame workers
 
 
-def _build_frame(cfg: SynthConfig, rigs: DatasetRigs, twin: TwinContext | None, job: Job,
-                 rng: np.random.Generator) -> tuple[Frame, dict]:  # fmt: skip
+def _build_frame(
+    cfg: SynthConfig, rigs: DatasetRigs, twin: TwinContext | None, job: Job, rng: np.random.Generator
+) -> tuple[Frame, dict]:
     if cfg.mode == "twin":
         return twin_frame(twin, twin.frames[job.index], rng)
     rig = rigs.rigs[job.day]
@@ -201,10 +235,19 @@ def render_job(job: Job) -> JobResult:
             path.parent.mkdir(parents=True, exist_ok=True)
             if not cv2.imwrite(str(path), img, [cv2.IMWRITE_PNG_COMPRESSION, cfg.png_compression]):
                 raise OSError(f"could not write {path}")
-        images.append({"height": rig.intrinsics[k].height, "width": rig.intrinsics[k].width,
-                       "date_captured": f"2026-01-{job.day:02d} 08:{job.frame // 60 % 60:02d}:{job.frame % 60:02d}",
-                       "file_name": name, "id": iid, "cam_id": cam, "day_id": job.day,
-                       "rights_holder": "synthetic (or-pose renderer)", "license": 1})  # fmt: skip
+        images.append(
+            {
+                "height": rig.intrinsics[k].height,
+                "width": rig.intrinsics[k].width,
+                "date_captured": f"2026-01-{job.day:02d} 08:{job.frame // 60 % 60:02d}:{job.frame % 60:02d}",
+                "file_name": name,
+                "id": iid,
+                "cam_id": cam,
+                "day_id": job.day,
+                "rights_holder": "synthetic (or-pose renderer)",
+                "license": 1,
+            }
+        )
         for i, person in enumerate(frame.persons):
             b = vr.boxes[i]
             if b is None:
@@ -214,10 +257,18 @@ def render_job(job: Job) -> JobResult:
             if annotated:
                 support[i] += 1
                 seen[i, :10] |= kp[:, 2] == 2
-            boxes.append({"image_id": iid, "person_role": person.role, "category_id": "1",
-                          "keypoints": [round(float(x), 2) for x in kp.ravel()],
-                          "bbox": [b[0], b[1], b[2] - b[0] + 1, b[3] - b[1] + 1], "only_bbox": int(not annotated),
-                          "face_blurred": 0, "person_id": person.person_id})  # fmt: skip
+            boxes.append(
+                {
+                    "image_id": iid,
+                    "person_role": person.role,
+                    "category_id": "1",
+                    "keypoints": [round(float(x), 2) for x in kp.ravel()],
+                    "bbox": [b[0], b[1], b[2] - b[0] + 1, b[3] - b[1] + 1],
+                    "only_bbox": int(not annotated),
+                    "face_blurred": 0,
+                    "person_id": person.person_id,
+                }
+            )
     mv_id = "_".join(str(im["id"]) for im in images)
     poses = []
     for i, person in enumerate(frame.persons):
@@ -231,7 +282,9 @@ def render_job(job: Job) -> JobResult:
             seen[i, 10], seen[i, 11] = seen[i, 8], seen[i, 9]  # hands follow the wrists
             flags = np.where(seen[i], 2.0, 1.0)
             flat = np.concatenate([pts, flags[:, None]], 1).round(3).ravel().tolist()
-        poses.append({"ref_camera": 0, "person_id": person.person_id, "image_ids": mv_id, "keypoints3D": flat})
+        poses.append(
+            {"ref_camera": 0, "person_id": person.person_id, "image_ids": mv_id, "keypoints3D": flat}
+        )
     stats = dict(stats, support=[int(s) for s in support if s > 0])
     return JobResult(job.day, job.frame, images, boxes, poses, time.perf_counter() - t0, stats)
 
@@ -299,22 +352,35 @@ def assemble(cfg: SynthConfig, rigs: DatasetRigs, results: list[JobResult]) -> d
     for d in sorted(rigs.rigs):
         for k, num in enumerate(rigs.cam_numbers[d]):
             serials[rigs.rigs[d].serials[k]] = num
-    settings = {k: v for k, v in asdict(cfg).items() if k not in ("out", "workers")}  # output-independent settings
-    info = {"version": VERSION, "description": f"or-pose synthetic RGB-D OR dataset ({cfg.mode})",
-            "contributor": "or-pose renderer (posenet.data.synth)", "year": 2026}  # fmt: skip
+    settings = {
+        k: v for k, v in asdict(cfg).items() if k not in ("out", "workers")
+    }  # output-independent settings
+    info = {
+        "version": VERSION,
+        "description": f"or-pose synthetic RGB-D OR dataset ({cfg.mode})",
+        "contributor": "or-pose renderer (posenet.data.synth)",
+        "year": 2026,
+    }
     if cfg.mode == "twin" or cfg.rig == "mvor":
         info["source"] = "3D poses, rig and box layout from MVOR (Srivastav et al. 2018), CC BY-NC-SA 4.0"
     return {
-        "dataset_info": {"camid_2_num": serials, "imagetype_2_num": {"depth": 1, "color": 0},
-                         "datasetid_2_num": {f"synthetic-day{d}": d for d in sorted(rigs.rigs)},
-                         "synthetic": settings},  # fmt: skip
+        "dataset_info": {
+            "camid_2_num": serials,
+            "imagetype_2_num": {"depth": 1, "color": 0},
+            "datasetid_2_num": {f"synthetic-day{d}": d for d in sorted(rigs.rigs)},
+            "synthetic": settings,
+        },
         "multiview_images": multiview,
         "categories": CATEGORIES,
         "cameras_info": cameras_info(rigs),
         "images": images,
         "annotations3D": poses3d,
         "info": info,
-        "licenses": {"url": "https://creativecommons.org/licenses/by-nc-sa/4.0/", "name": "CC BY-NC-SA 4.0", "id": 1},
+        "licenses": {
+            "url": "https://creativecommons.org/licenses/by-nc-sa/4.0/",
+            "name": "CC BY-NC-SA 4.0",
+            "id": 1,
+        },
         "annotations": annotations,
     }
 
@@ -331,7 +397,9 @@ def summarise(results: list[JobResult], wall: float) -> dict:
         "frames": len(results),
         "wall_seconds": round(wall, 1),
         "seconds_per_frame_wall": round(wall / max(len(results), 1), 3),
-        "seconds_per_frame_worker": round(float(np.mean([r.seconds for r in results])) if results else 0.0, 3),
+        "seconds_per_frame_worker": round(
+            float(np.mean([r.seconds for r in results])) if results else 0.0, 3
+        ),
         "boxes": sum(len(r.boxes) for r in results),
         "poses": sum(len(r.poses) for r in results),
         "support_histogram": {str(k): int(support[k]) for k in range(1, len(support)) if support[k]},
