@@ -1,0 +1,93 @@
+"""The batch client: its resumable output file, the detector-mode identity association, and a
+killed-and-resumed
+run against a real server (uvicorn subprocess, tiny random-init models, the tiny MVOR-format dataset)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from conftest import write_tiny_mvor
+from service_harness import REPO_ROOT, Server, tiny_checkpoints
+
+from service.association import assign, mean_view_iou
+from service.client import append_line, read_done
+
+
+def test_read_done_drops_a_torn_last_line_and_appends_cleanly(tmp_path):
+    out = tmp_path / "results.jsonl"
+    assert read_done(out) == {}
+    with open(out, "a") as f:
+        append_line(f, {"id": "a", "status": 200})
+        append_line(f, {"id": "b", "status": 422})
+        f.write('{"id": "c", "sta')  # a kill in the middle of a write
+    assert set(read_done(out)) == {"a", "b"}
+    with open(out, "a") as f:
+        append_line(f, {"id": "c", "status": 200})
+    lines = out.read_text().splitlines()
+    assert [json.loads(x)["id"] for x in lines] == ["a", "b", "c"]
+
+
+def test_association_recovers_a_permutation_and_respects_missing_views():
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 500, (5, 3, 2))
+    gt = np.concatenate([xy, xy + rng.uniform(40, 120, (5, 3, 2))], axis=-1)  # (G, V, 4)
+    perm = rng.permutation(5)
+    pred = [[list(b + rng.normal(0, 2, 4)) for b in gt[g]] for g in perm]
+    pred[0][1] = None  # a person the detector missed in one view still matches
+    gt_list = [[list(b) for b in person] for person in gt]
+    assert assign(pred, gt_list) == perm.tolist()
+    # A view where only one side has a box scores 0: the mean over 3 views of (1, 1, 0) is 2/3.
+    one = np.array([[[0, 0, 10, 10], [0, 0, 10, 10], [np.nan] * 4]], float)
+    two = np.array([[[0, 0, 10, 10], [0, 0, 10, 10], [0, 0, 10, 10]]], float)
+    np.testing.assert_allclose(mean_view_iou(one, two), [[2 / 3]])
+    assert assign([[[0, 0, 1, 1], None, None]], gt_list) == [None]  # no overlap: no identity
+    with pytest.raises(ValueError, match=r"\(P, V, 4\)"):
+        mean_view_iou(np.zeros((1, 3, 4)), np.zeros((1, 2, 4)))
+
+
+def client_cmd(data, url, out, *extra) -> list[str]:
+    return [sys.executable, "-m", "service.client", str(data.root), "--annotations", str(data.annotations),
+            "--url", url, "--out", str(out), *extra]  # fmt: skip
+
+
+def test_client_resumes_after_being_killed(tmp_path):
+    data = write_tiny_mvor(tmp_path / "tiny", days=(1, 2), frames_per_day=4)
+    ids = [mv["id"] for mv in data.gt["multiview_images"]]
+    pose, det = tiny_checkpoints(tmp_path / "ckpt")
+    # One request in flight on the server and three from the client: the client must retry the 503s.
+    env = {
+        "ORPOSE_POSE_CHECKPOINT": str(pose),
+        "ORPOSE_DETECTOR_CHECKPOINT": str(det),
+        "ORPOSE_MAX_IN_FLIGHT": "1",
+    }
+    out = tmp_path / "results.jsonl"
+    with Server(env) as url:
+        cmd = client_cmd(data, url, out, "--reference-boxes", "--concurrency", "3")
+        first = subprocess.Popen(cmd, cwd=REPO_ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (out.exists() and out.read_bytes().count(b"\n") >= 1):
+            time.sleep(0.02)
+        os.kill(first.pid, signal.SIGKILL)
+        first.wait()
+        written = out.read_bytes().count(b"\n")
+        assert 1 <= written < len(ids), "the first run should have been killed mid-way"
+        with open(out, "a") as f:
+            f.write('{"id": "' + ids[-1][:10])  # and as if the kill had cut a line short
+
+        second = subprocess.run(
+            [*cmd, "--evaluate"], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120
+        )
+    assert second.returncode == 0, second.stdout + second.stderr
+    lines = [json.loads(x) for x in out.read_text().splitlines()]
+    assert sorted(x["id"] for x in lines) == sorted(ids)  # every frame once: nothing lost, nothing duplicated
+    assert all(x["status"] == 200 and x["response"]["mode"] == "reference_boxes" for x in lines)
+    assert f"{written} already in" in second.stdout and f"{len(ids) - written} done now" in second.stdout
+    assert "MPJPE (cm) per number of supporting views" in second.stdout
+    assert "0 without a prediction" in second.stdout  # every annotated pose got a prediction
