@@ -181,25 +181,33 @@ def hit_shell(p: Primitive, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
 HIT = {ELLIPSOID: hit_ellipsoid, CAPSULE: hit_capsule, BOX: hit_box, SHELL: hit_shell}
 
 
-def normals(p: Primitive, pts: np.ndarray) -> np.ndarray:
-    """Unit outward normals ``(N, 3)`` of primitive ``p`` at surface points ``pts (N, 3)`` (camera frame).
+def normals(p: Primitive, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Unit outward normals ``(3, N)`` of primitive ``p`` at surface points with coordinates ``x, y, z (N,)``.
 
-    The shell's normals point into the room, since it is seen from inside.
+    Points are in the camera frame. Column arrays with scalar coefficients keep every operation a contiguous
+    1-D pass (much faster in numpy than (N, 3) @ (3, 3) products). The shell's normals point into the room,
+    since it is seen from inside.
     """
-    c, R, size = (x.astype(np.float32) for x in (p.center, p.rotation, p.size))
     if p.kind == CAPSULE:
-        a = p.a.astype(np.float32)
-        ba = (p.b - p.a).astype(np.float32)
-        s = np.clip((pts - a) @ ba / float(ba @ ba), 0.0, 1.0)
-        n = pts - (a + s[:, None] * ba)
-    elif p.kind == ELLIPSOID:
-        local = (pts - c) @ R / size**2
-        n = local @ R.T
+        a, ba = p.a, p.b - p.a
+        s = ((x - a[0]) * ba[0] + (y - a[1]) * ba[1] + (z - a[2]) * ba[2]) * (1.0 / float(ba @ ba))
+        np.clip(s, 0.0, 1.0, out=s)
+        n = [x - a[0] - s * ba[0], y - a[1] - s * ba[1], z - a[2] - s * ba[2]]
     else:
-        local = (pts - c) @ R / size
-        axis = np.abs(local).argmax(axis=1)
-        sign = np.sign(np.take_along_axis(local, axis[:, None], 1))
-        if p.kind == SHELL:
-            sign = -sign
-        n = R.T[axis] * sign
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-9)
+        c, R = p.center, p.rotation
+        d = (x - c[0], y - c[1], z - c[2])
+        # local coordinates along the shape's axes: local_i = sum_j d_j R[j, i]
+        local = [d[0] * R[0, i] + d[1] * R[1, i] + d[2] * R[2, i] for i in range(3)]
+        if p.kind == ELLIPSOID:
+            g = [local[i] * (1.0 / p.size[i] ** 2) for i in range(3)]
+            n = [g[0] * R[j, 0] + g[1] * R[j, 1] + g[2] * R[j, 2] for j in range(3)]
+        else:  # box or shell: the normal of the face whose slab the point is most outside of
+            q = [np.abs(local[i]) * (1.0 / p.size[i]) for i in range(3)]
+            ax0 = (q[0] >= q[1]) & (q[0] >= q[2])
+            ax1 = ~ax0 & (q[1] >= q[2])
+            ax2 = ~ax0 & ~ax1
+            sign = -1.0 if p.kind == SHELL else 1.0
+            w = [np.where(m, np.sign(local[i]) * sign, 0.0) for i, m in enumerate((ax0, ax1, ax2))]
+            n = [w[0] * R[j, 0] + w[1] * R[j, 1] + w[2] * R[j, 2] for j in range(3)]
+    n = np.stack(n).astype(np.float32)  # (3, N)
+    return n / np.maximum(np.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2), 1e-9)

@@ -35,7 +35,7 @@ class GBuffer:
     Attributes:
         depth: (H, W) float64 z in mm (np.inf where no surface).
         prim: (H, W) int32 index of the visible primitive (-1 for none).
-        normal: (H, W, 3) float32 unit normals in the camera frame.
+        normal: (3, H, W) float32 unit normals in the camera frame (planar: one image per axis).
     """
 
     depth: np.ndarray
@@ -99,18 +99,19 @@ def rasterize(prims: list[Primitive], K: Intrinsics) -> GBuffer:
         zb[closer] = t[closer]
         prim[v0:v1, u0:u1][closer] = i
 
-    normal = np.zeros((H, W, 3), np.float32)
+    normal = np.zeros((3, H * W), np.float32)
     flat = prim.ravel()
-    order = np.argsort(flat, kind="stable")
-    ids, starts = np.unique(flat[order], return_index=True)
+    order = np.argsort(flat, kind="stable")  # pixels grouped by the primitive that owns them
+    sorted_ids = flat[order]
+    starts = np.flatnonzero(np.diff(sorted_ids, prepend=sorted_ids[0] - 1))
     bounds = np.append(starts, len(flat))
     vv, uu = np.divmod(order, W)
-    z = depth.ravel()[order]
-    pts = np.stack([du[uu] * z, dv[vv] * z, z], axis=1).astype(np.float32)  # (H*W, 3) camera-frame points
-    nflat = normal.reshape(-1, 3)
-    for k, i in enumerate(ids):  # one batch of pixels per visible primitive
+    z = depth.ravel()[order].astype(np.float32)
+    x, y = du.astype(np.float32)[uu] * z, dv.astype(np.float32)[vv] * z  # camera-frame surface points
+    for k, start in enumerate(starts):  # one batch of pixels per visible primitive
+        i = sorted_ids[start]
         if i < 0:
             continue
-        sl = slice(bounds[k], bounds[k + 1])
-        nflat[order[sl]] = normals(prims[i], pts[sl])
-    return GBuffer(depth, prim, normal)
+        sl = slice(start, bounds[k + 1])
+        normal[:, order[sl]] = normals(prims[i], x[sl], y[sl], z[sl])
+    return GBuffer(depth, prim, normal.reshape(3, H, W))

@@ -84,7 +84,7 @@ def simulate_depth(
     wobble = cv2.resize(
         rng.normal(0, 1, (H // 16, W // 16)).astype(np.float32), (W, H), interpolation=cv2.INTER_CUBIC
     )
-    zn = z + sigma * (rng.standard_normal((H, W), dtype=np.float32) * 0.7 + wobble * 0.7)
+    zn = z + sigma * (noise_field(rng, H, W) * 0.7 + wobble * 0.7)
     # Disparity quantisation.
     d = np.round(fb / zn / cfg.disparity_step) * cfg.disparity_step
     zq = fb / np.maximum(d, 1e-6)
@@ -117,6 +117,22 @@ def sample_lighting(rng: np.random.Generator) -> Lighting:
         wb,
         rng.uniform(0.75, 1.3),
     )
+
+
+_NOISE_BANK: np.ndarray | None = None
+
+
+def noise_field(rng: np.random.Generator, H: int, W: int) -> np.ndarray:
+    """``(H, W)`` float32 white Gaussian noise: a random window of a fixed bank (drawing ~1M normals per view
+    would cost as much as the rest of the sensor model; a window at a random offset is as good for images)."""
+    global _NOISE_BANK
+    if _NOISE_BANK is None:
+        _NOISE_BANK = np.random.default_rng(20261122).standard_normal((1536, 2048), dtype=np.float32)
+    if H > 1024 or W > 1024:
+        return rng.standard_normal((H, W), dtype=np.float32)
+    y0, x0 = rng.integers(0, _NOISE_BANK.shape[0] - H), rng.integers(0, _NOISE_BANK.shape[1] - W)
+    field = _NOISE_BANK[y0 : y0 + H, x0 : x0 + W]
+    return field if rng.random() < 0.5 else field[::-1, ::-1]
 
 
 # sRGB-like gamma as a lookup table (a power over every pixel costs more than the rest of the shading).
@@ -159,12 +175,12 @@ def shade_colour(
     n = g.normal
     l_key = (world_to_cam[:3, :3] @ light.key_dir).astype(np.float32)
     view, vignette = _view_geometry(K.fx, K.fy, K.cx, K.cy, W, H, cfg.vignetting)
-    nx, ny, nz = n[..., 0], n[..., 1], n[..., 2]
+    nx, ny, nz = n[0], n[1], n[2]
     diffuse = np.maximum(nx * l_key[0] + ny * l_key[1] + nz * l_key[2], 0)
     n_dot_v = np.maximum(nx * view[0] + ny * view[1] + nz * view[2], 0)  # a fill light near the camera
     shade = light.ambient + light.key * diffuse + light.fill * n_dot_v
     # Fabric/grain texture: a fresh noise field at two scales.
-    grain = rng.standard_normal((H, W), dtype=np.float32)
+    grain = noise_field(rng, H, W)
     blotch = cv2.resize(
         rng.standard_normal((H // 8, W // 8), dtype=np.float32), (W, H), interpolation=cv2.INTER_LINEAR
     )
@@ -173,14 +189,14 @@ def shade_colour(
     radiance = albedo * shade[..., None]
     shiny = specular > 0
     if shiny.any():  # Blinn-Phong highlights, only where a surface can shine
-        nv = n[shiny]
+        nv = np.stack([n[i][shiny] for i in range(3)], 1)
         half = np.stack([view[i][shiny] for i in range(3)], 1) + l_key
         half /= np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-6)
         spec = specular[shiny] * np.maximum((nv * half).sum(1), 0) ** 40 * light.exposure
         radiance[shiny] += spec[:, None]
     radiance *= (light.white_balance).astype(np.float32)
     img = _GAMMA[np.clip(radiance * (len(_GAMMA) - 1), 0, len(_GAMMA) - 1).astype(np.int32)]
-    img += rng.standard_normal(img.shape, dtype=np.float32) * np.sqrt(
+    img += np.stack([noise_field(rng, H, W) for _ in range(3)], -1) * np.sqrt(
         (cfg.read_noise / 255) ** 2 + cfg.shot_noise**2 * img
     )
     img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma)
