@@ -252,3 +252,58 @@ def build_scene(
         grid_in_box = _in_box(uv.expand(P, V, H * W, 2).reshape(P * V, H * W, 2), safe)  # (P*V, H*W)
         valid = grid_in_box.view(P, V, H * W) & has_box.view(P, V, 1) & (d > 0)
     return SceneInput(images, A, flipped, has_box, cameras, uv, d, valid, (W, H), config.mode)
+
+
+@dataclass
+class ScenePersons:
+    """The persons of one :class:`posenet.data.sample.Sample` to run, their boxes and (maybe) their truth.
+
+    Attributes:
+        views: V ``(color or None, depth, Camera)`` tuples, as :func:`build_scene` takes them.
+        boxes: (P, V, 4) xyxy; has_box: (P, V) bool; person_ids: (P,) int64.
+        poses: (P, J, 3) mm and valid (P, J) bool; for persons without a 3D pose, zeros and False.
+    """
+
+    views: list
+    boxes: Tensor
+    has_box: Tensor
+    person_ids: Tensor
+    poses: Tensor
+    valid: Tensor
+
+
+def persons_of_sample(sample, which: str = "annotated") -> ScenePersons:
+    """The persons of a ``Sample``: ``"annotated"`` = its 3D poses that have a box in some view (training,
+    validation); ``"boxed"`` = every person id (>= 0) that has a box in some view (prediction)."""
+    if any(v.depth is None for v in sample.views):
+        raise ValueError(f"sample {sample.id}: every view needs a depth image (load the dataset with depth)")
+    views = [(v.color, v.depth, v.camera) for v in sample.views]
+    J = sample.poses.shape[1] if sample.poses.ndim == 3 else 10
+    if which == "annotated":
+        ids = [int(i) for i in sample.person_ids]
+        poses, valid = sample.poses, sample.valid
+    elif which == "boxed":
+        ids = sorted({int(i) for v in sample.views for i in v.box_person_ids if i >= 0})
+        index = {int(pid): k for k, pid in enumerate(sample.person_ids)}
+        poses = np.stack(
+            [sample.poses[index[i]] if i in index else np.zeros((J, 3), np.float32) for i in ids]
+        )
+        valid = np.stack([sample.valid[index[i]] if i in index else np.zeros(J, bool) for i in ids])
+        poses, valid = poses.reshape(len(ids), J, 3), valid.reshape(len(ids), J)
+    else:
+        raise ValueError(f"which must be 'annotated' or 'boxed', got {which!r}")
+    boxes = np.zeros((len(ids), len(views), 4), np.float32)
+    has_box = np.zeros((len(ids), len(views)), bool)
+    for p, pid in enumerate(ids):
+        for v, box in enumerate(sample.person_boxes(pid)):
+            if box is not None:
+                boxes[p, v], has_box[p, v] = box, True
+    keep = has_box.any(1)
+    return ScenePersons(
+        views,
+        torch.from_numpy(boxes[keep]),
+        torch.from_numpy(has_box[keep]),
+        torch.tensor(ids, dtype=torch.int64)[torch.from_numpy(keep)],
+        torch.from_numpy(np.asarray(poses, np.float32)[keep]),
+        torch.from_numpy(np.asarray(valid, bool)[keep]),
+    )

@@ -79,21 +79,37 @@ class PoseNet(nn.Module):
             return torch.autocast(device.type, dtype=torch.bfloat16)
         return contextlib.nullcontext()
 
-    def heatmaps(self, scene: SceneInput) -> Tensor:
-        """U-Net logits ``(P*V, J, h, w)`` in network pixels, zeros for (person, view) pairs without a box."""
-        images = scene.images.to(next(self.parameters()).device)
-        run = scene.has_box.reshape(-1).to(images.device)  # (P*V,)
-        x = images[run]
+    def heatmaps(self, scenes: list[SceneInput]) -> list[Tensor]:
+        """U-Net logits ``(P*V, J, h, w)`` per scene, zeros for (person, view) pairs without a box.
+
+        Every pair of every scene runs in one U-Net batch (scenes of one batch share the network input size).
+        """
+        device = next(self.parameters()).device
+        runs = [s.has_box.reshape(-1).to(device) for s in scenes]  # (P*V,) per scene
+        x = torch.cat([s.images.to(device)[r] for s, r in zip(scenes, runs, strict=True)])
         if self.config.channels_last:
             x = x.contiguous(memory_format=torch.channels_last)
-        with self._autocast(images.device):
-            out = self.unet(x) if x.shape[0] else x.new_zeros(0, self.config.unet.out_channels, *x.shape[-2:])
-        heat = images.new_zeros(images.shape[0], out.shape[1], *images.shape[-2:])
-        heat[run] = out.float()
-        return heat
+        J = self.config.unet.out_channels
+        with self._autocast(device):
+            out = self.unet(x) if x.shape[0] else x.new_zeros(0, J, *x.shape[-2:])
+        out = out.float().contiguous()
+        heats, start = [], 0
+        for s, r in zip(scenes, runs, strict=True):
+            n = int(r.sum())
+            heat = out.new_zeros(r.shape[0], J, *s.images.shape[-2:])
+            heat[r] = out[start : start + n]
+            heats.append(heat)
+            start += n
+        return heats
 
-    def forward(self, scene: SceneInput) -> PoseOutput:
-        heat = self.heatmaps(scene)
+    def forward(self, scenes: SceneInput | list[SceneInput]) -> PoseOutput | list[PoseOutput]:
+        """One scene -> its :class:`PoseOutput`; a list of scenes -> a list (one U-Net pass for them all)."""
+        single = isinstance(scenes, SceneInput)
+        batch = [scenes] if single else list(scenes)
+        outputs = [self._joints(s, h) for s, h in zip(batch, self.heatmaps(batch), strict=True)]
+        return outputs[0] if single else outputs
+
+    def _joints(self, scene: SceneInput, heat: Tensor) -> PoseOutput:
         dev = heat.device
         P, V = scene.has_box.shape
         A, flipped = scene.A.to(dev), scene.flipped.to(dev)

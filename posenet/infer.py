@@ -1,0 +1,117 @@
+"""Batched inference: all persons x views of a scene in one forward pass (the API the service calls).
+
+Usage::
+
+    est = PoseEstimator.from_checkpoint("runs/fold4/best")          # None -> the shipped default weights
+    pred = est.predict(views, person_boxes)                        # views: V x (color, depth, Camera)
+    pred.joints      # (P, J, 3) mm, reference (camera 0) frame
+    pred.confidence  # (P, J) mm: the spread of each joint's 3D point cloud (see posenet.lifting)
+
+Any image size works: the input pipeline crops and resizes internally (:mod:`posenet.inputs`) and keeps the
+cameras right. Runs under ``torch.inference_mode`` with the memory format and bf16 setting of the checkpoint's
+config (channels_last + bf16 autocast measured fastest on CPU: ``benchmarks/posenet_speed.py``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from posenet.cameras import Camera
+from posenet.checkpoint import load_checkpoint
+from posenet.inputs import build_scene
+from posenet.model import PoseNet
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class PosePrediction:
+    """joints (P, J, 3) mm reference frame; confidence (P, J) mm (smaller = more certain); has_points (P,)
+    whether any pixel could vote (else joints are meaningless); heatmaps (P, V, J, M) logits at the points,
+    with their uv (P or 1, V, M, 2), depth and valid mask, when asked for (visualisation)."""
+
+    joints: Tensor
+    confidence: Tensor
+    has_points: Tensor
+    heatmaps: Tensor | None = None
+    uv: Tensor | None = None
+    depth: Tensor | None = None
+    valid: Tensor | None = None
+
+
+class PoseEstimator:
+    def __init__(
+        self, model: PoseNet, config: dict | None = None, device: str | torch.device = "cpu"
+    ) -> None:
+        self.device = torch.device(device)
+        self.model = model.to(self.device).eval()
+        self.config = config or {}
+
+    @classmethod
+    def from_checkpoint(
+        cls, path: str | Path | None = None, device: str | torch.device = "cpu"
+    ) -> PoseEstimator:
+        """Load a checkpoint folder or ``.safetensors`` file; None -> ``posenet/weights/default.safetensors``
+        (raises FileNotFoundError saying how to train or point to one when it is missing)."""
+        model, config = load_checkpoint(path, device)
+        return cls(model, config, device)
+
+    @staticmethod
+    def _boxes(person_boxes: Sequence[Sequence], V: int) -> tuple[Tensor, Tensor]:
+        P = len(person_boxes)
+        boxes = torch.zeros(P, V, 4)
+        has = torch.zeros(P, V, dtype=torch.bool)
+        for p, per_view in enumerate(person_boxes):
+            if len(per_view) != V:
+                raise ValueError(f"person {p} has {len(per_view)} box entries, expected one per view ({V})")
+            for v, box in enumerate(per_view):
+                if box is None:
+                    continue
+                b = torch.as_tensor(np.asarray(box, np.float32)).reshape(-1)
+                if b.shape != (4,) or not torch.isfinite(b).all() or b[2] <= b[0] or b[3] <= b[1]:
+                    raise ValueError(
+                        f"person {p}, view {v}: box must be finite xyxy with x1 > x0, y1 > y0, got {box}"
+                    )
+                boxes[p, v], has[p, v] = b, True
+        return boxes, has
+
+    def predict(
+        self,
+        views: Sequence[tuple[np.ndarray | None, np.ndarray, Camera]],
+        person_boxes: Sequence[Sequence],
+        return_heatmaps: bool = False,
+    ) -> PosePrediction:
+        """3D poses of P persons in one scene.
+
+        Args:
+            views: V tuples ``(color (H, W, 3) uint8 RGB or None, depth (H, W) uint16 mm, Camera)``.
+            person_boxes: P lists of V entries, each an xyxy box (pixels of that view) or None.
+            return_heatmaps: also return the logits at the lifted points (for pictures).
+        """
+        V = len(views)
+        boxes, has_box = self._boxes(person_boxes, V)
+        J = self.model.config.unet.out_channels
+        if boxes.shape[0] == 0:
+            z = torch.zeros(0, J)
+            return PosePrediction(torch.zeros(0, J, 3), z, torch.zeros(0, dtype=torch.bool))
+        scene = build_scene(list(views), boxes, has_box, self.model.config.inputs)
+        with torch.inference_mode():
+            out = self.model(scene)
+        pred = PosePrediction(
+            out.joints.cpu(),
+            out.confidence.cpu(),
+            (out.has_points & has_box.any(1).to(out.has_points.device)).cpu(),
+        )
+        if return_heatmaps:
+            pred.heatmaps, pred.uv, pred.depth, pred.valid = (
+                out.logits.cpu(),
+                scene.uv,
+                scene.depth,
+                scene.valid,
+            )
+        return pred

@@ -1,0 +1,466 @@
+"""Train the pose network end to end through the cameras (MPJPE in mm as the loss), one fold at a time.
+
+Single process (the CPU preset, the default)::
+
+    python -m posenet.train --data DIR --holdout-day 4 --out runs/fold4
+    python -m posenet.train --data DIR --holdout-day 4 --out runs/fold4 --resume      # continue a run
+
+The paper's settings (full 320x240 images, 288x208 random crops, batch of 1 scene, Adam 1e-3, 200 epochs)::
+
+    python -m posenet.train --preset paper --data DIR --holdout-day 4 --out runs/paper4
+
+Distributed data-parallel (gloo on CPU, nccl on GPUs)::
+
+    torchrun --nproc_per_node 2 -m posenet.train --data DIR --holdout-day 4 --out runs/fold4
+
+``--annotations`` defaults to ``DIR/annotations.json`` (the renderer's layout); for MVOR pass
+``camma_mvor_2018.json``. The run folder gets ``config.json`` (the resolved config), ``log.jsonl`` (one line
+per epoch: loss, validation MPJPE), and the checkpoints ``last/`` and ``best/`` (lowest validation MPJPE on
+the held-out day), each ``model.safetensors`` + ``config.json`` + ``train_state.pt``. See ``docs/posenet.md``
+for the presets and how the CPU preset differs from the paper.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+import torch.distributed as dist
+from tqdm import tqdm
+
+from posenet.augment import AugmentConfig
+from posenet.checkpoint import save_checkpoint
+from posenet.inputs import InputConfig, build_scene, persons_of_sample
+from posenet.loss import mpjpe, reprojection_2d
+from posenet.model import ModelConfig, PoseNet
+
+
+@dataclass
+class TrainConfig:
+    data: str
+    out: str
+    annotations: str | None = None  # default: DATA/annotations.json
+    holdout_day: int | None = (
+        None  # the fold's test day (validation); None trains on every day, no validation
+    )
+    preset: str = "cpu"
+    subsample: int = 2  # image subsampling of the reader: 2 gives the paper's 320x240
+    epochs: int = 60
+    lr: float = 1e-3  # Adam, as the paper
+    scenes_per_step: int = 4  # scenes per optimiser step (the paper: 1)
+    decay_start: float = 0.75  # cosine decay of the LR to 0 over the last quarter; 1.0 keeps it constant
+    val_every: int = 5  # epochs between validations (and always after the last epoch)
+    threads: int | None = None  # torch CPU threads (default: torch's choice)
+    seed: int = 0
+    cache: bool = True  # keep decoded frames in memory (num_workers must then be 0)
+    num_workers: int = 0  # DataLoader workers for image decoding (without cache)
+    max_frames: int | None = None  # use only the first N training frames (smoke runs)
+    device: str | None = None  # default: cuda if available, else cpu
+    model: ModelConfig = field(default_factory=ModelConfig)
+    augment: AugmentConfig = field(default_factory=AugmentConfig)
+    data_description: dict = field(default_factory=dict)  # filled in at run time: days, frames, poses
+
+    @staticmethod
+    def from_dict(d: dict) -> TrainConfig:
+        d = dict(d)
+        d["model"] = (
+            ModelConfig(**d["model"]) if isinstance(d.get("model"), dict) else d.get("model", ModelConfig())
+        )
+        d["augment"] = (
+            AugmentConfig(**d["augment"]) if isinstance(d.get("augment"), dict) else d.get("augment")
+        )
+        return TrainConfig(**d)
+
+
+# What each preset sets; anything given on the command line overrides it.
+PRESETS: dict[str, dict] = {
+    # Person crops: 96x96 crops of 1.1x the box; the crop is one more invertible affine (posenet.inputs).
+    "cpu": {
+        "subsample": 2,
+        "epochs": 60,
+        "scenes_per_step": 4,
+        "decay_start": 0.75,
+        "model": {
+            "inputs": {"mode": "crop", "crop_size": 96, "crop_margin": 1.1, "extra_depth": True},
+            "base": 16,
+            "depth": 3,
+            "bf16": True,
+            "channels_last": True,
+        },
+        "augment": {"flip": True, "rotate_deg": 15.0, "crop": True, "color": True},
+    },
+    # The paper: full 320x240 images, random 288x208 crops, batch 1 scene, Adam 1e-3, 200 epochs, no decay.
+    "paper": {
+        "subsample": 2,
+        "epochs": 200,
+        "scenes_per_step": 1,
+        "decay_start": 1.0,
+        "cache": False,
+        "model": {
+            "inputs": {
+                "mode": "full",
+                "image_size": (320, 240),
+                "train_crop": (288, 208),
+                "extra_depth": False,
+            },
+            "base": 64,  # the original U-Net's width (the paper does not state its own)
+            "depth": 4,
+            "bf16": False,
+            "channels_last": True,
+        },
+        "augment": {"flip": True, "rotate_deg": 15.0, "crop": True, "color": True},
+    },
+}
+
+
+def resolve_config(args: argparse.Namespace) -> TrainConfig:
+    """Preset defaults, overridden by every command-line option that was given."""
+    if args.preset not in PRESETS:
+        raise ValueError(f"unknown preset {args.preset!r}; choose from {sorted(PRESETS)}")
+    preset = json.loads(json.dumps(PRESETS[args.preset]))  # deep copy
+    inputs = preset["model"].pop("inputs")
+    for key in ("modality", "crop_size", "extra_depth"):
+        if getattr(args, key) is not None:
+            inputs[key] = getattr(args, key)
+    model = preset.pop("model")
+    for key in ("base", "depth", "bf16", "channels_last"):
+        if getattr(args, key) is not None:
+            model[key] = getattr(args, key)
+    if args.loss is not None:
+        model["aggregation"] = args.loss
+    augment = preset.pop("augment")
+    for key in ("flip", "crop", "color"):
+        if getattr(args, key) is not None:
+            augment[key] = getattr(args, key)
+    if args.rotate is not None:
+        augment["rotate_deg"] = args.rotate
+    top = {f.name for f in dataclasses.fields(TrainConfig)} - {
+        "model",
+        "augment",
+        "data_description",
+        "preset",
+    }
+    given = {k: getattr(args, k) for k in top if getattr(args, k, None) is not None}
+    cfg = {**preset, **given, "preset": args.preset}
+    return TrainConfig(
+        **cfg, model=ModelConfig(inputs=InputConfig(**inputs), **model), augment=AugmentConfig(**augment)
+    )
+
+
+# ----------------------------------------------------------------------------- data
+class CachedFrames(torch.utils.data.Dataset):
+    """Decoded frames kept in memory after their first read (uint8 colour, uint16 depth: ~0.4 MB per view at
+    320x240), so later epochs skip PNG decoding."""
+
+    def __init__(self, dataset) -> None:
+        self.dataset = dataset
+        self.cache: dict[int, object] = {}
+
+    def __len__(self) -> int:
+        return len(self.dataset)
+
+    def __getitem__(self, i: int):
+        if i not in self.cache:
+            self.cache[i] = self.dataset[i]
+        return self.cache[i]
+
+
+def trainable_frames(annotations: dict, subsample: int, days) -> list[int]:
+    """Indices of frames with at least one 3D pose that has a box (read from the annotations, no images)."""
+    from posenet.data.mvor import MvorDataset
+
+    meta = MvorDataset(None, annotations, subsample=subsample, modalities=(), days=days)
+    keep = []
+    for i in range(len(meta)):
+        s = meta[i]
+        if any(any(b is not None for b in s.person_boxes(int(p))) for p in s.person_ids):
+            keep.append(i)
+    return keep
+
+
+# ----------------------------------------------------------------------------- distributed
+def setup_distributed(device: str) -> tuple[int, int]:
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world > 1 and not dist.is_initialized():
+        dist.init_process_group("nccl" if device.startswith("cuda") else "gloo")
+    return (dist.get_rank(), dist.get_world_size()) if dist.is_initialized() else (0, 1)
+
+
+def lr_factor(step: int, total: int, decay_start: float) -> float:
+    """1 until ``decay_start`` of the training, then a cosine down to 0 at the end."""
+    start = decay_start * total
+    if step < start or total <= start:
+        return 1.0
+    return 0.5 * (1 + math.cos(math.pi * (step - start) / (total - start)))
+
+
+def scene_loss(model_config: ModelConfig, out, persons, cameras) -> torch.Tensor:
+    if model_config.aggregation == "2d":
+        return reprojection_2d(out.uv_hat, persons.poses, persons.valid, out.view_valid, cameras)
+    return mpjpe(out.joints, persons.poses.to(out.joints.device), persons.valid.to(out.joints.device))
+
+
+def validate(model: PoseNet, annotations: dict, dataset, days) -> dict:
+    """MPJPE on the held-out day with posenet.evaluate (cm), plus the plain mean in mm."""
+    from posenet.evaluate import evaluate
+    from posenet.predict import predict_samples
+
+    preds = predict_samples(model, dataset, which="annotated", progress=False)
+    result = evaluate(annotations, preds, days=days)
+    return {
+        "val_mpjpe_cm": result["overall"],
+        "val_average_cm": result["per_joint"]["average"],
+        "result": result,
+    }
+
+
+# ----------------------------------------------------------------------------- training
+def train(cfg: TrainConfig) -> dict:
+    from posenet.data.mvor import MvorDataset, collate_samples, load_annotations
+
+    device = cfg.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    rank, world = setup_distributed(device)
+    if device.startswith("cuda") and world > 1:
+        device = f"cuda:{int(os.environ.get('LOCAL_RANK', rank))}"
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
+    out = Path(cfg.out)
+    ann_path = cfg.annotations or str(Path(cfg.data) / "annotations.json")
+    annotations = load_annotations(ann_path)
+
+    all_days = sorted(MvorDataset(None, annotations, modalities=()).days)
+    if cfg.holdout_day is not None and cfg.holdout_day not in all_days:
+        raise ValueError(f"--holdout-day {cfg.holdout_day} is not among the dataset's days {all_days}")
+    train_days = [d for d in all_days if d != cfg.holdout_day]
+    if not train_days:
+        raise ValueError(f"no training days left after holding out day {cfg.holdout_day}")
+    modalities = ("depth",) if cfg.model.inputs.modality == "depth" else ("color", "depth")
+    train_set = MvorDataset(cfg.data, annotations, cfg.subsample, modalities, days=train_days)
+    frames = trainable_frames(annotations, cfg.subsample, train_days)
+    if cfg.max_frames:
+        frames = frames[: cfg.max_frames]
+    if not frames:
+        raise ValueError(f"no training frame with an annotated, boxed pose in days {train_days}")
+    val_set = None
+    if cfg.holdout_day is not None:
+        val_set = MvorDataset(cfg.data, annotations, cfg.subsample, modalities, days=[cfg.holdout_day])
+    cfg.data_description = {
+        "annotations": str(ann_path),
+        "train_days": train_days,
+        "holdout_day": cfg.holdout_day,
+        "train_frames": len(frames),
+        "val_frames": 0 if val_set is None else len(val_set),
+    }
+    if cfg.cache and cfg.num_workers:
+        raise ValueError("--cache keeps frames in this process: use it with --num-workers 0")
+    source = CachedFrames(train_set) if cfg.cache else train_set
+    subset = torch.utils.data.Subset(source, frames)
+    sampler = torch.utils.data.distributed.DistributedSampler(
+        subset, num_replicas=world, rank=rank, shuffle=True, seed=cfg.seed, drop_last=False
+    )
+    loader = torch.utils.data.DataLoader(
+        subset,
+        batch_size=cfg.scenes_per_step,
+        sampler=sampler,
+        collate_fn=collate_samples,
+        num_workers=cfg.num_workers,
+        persistent_workers=cfg.num_workers > 0,
+    )
+
+    model = PoseNet(cfg.model).to(device)
+    optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    total_steps = cfg.epochs * len(loader)
+    scheduler = torch.optim.lr_scheduler.LambdaLR(
+        optimiser, lambda s: lr_factor(s, total_steps, cfg.decay_start)
+    )
+    start_epoch, best = 0, float("inf")
+    state_file = out / "last" / "train_state.pt"
+    if state_file.is_file():
+        from safetensors.torch import load_file
+
+        state = torch.load(state_file, map_location="cpu", weights_only=False)
+        model.load_state_dict(load_file(out / "last" / "model.safetensors"))
+        optimiser.load_state_dict(state["optimiser"])
+        scheduler.load_state_dict(state["scheduler"])
+        start_epoch, best = state["epoch"], state["best"]
+        if rank == 0:
+            print(f"resuming {out} at epoch {start_epoch} (best {best:.2f} cm)", file=sys.stderr)
+    net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
+    config_dict = dataclasses.asdict(cfg)
+    if rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "config.json").write_text(json.dumps(config_dict, indent=2, default=str))
+
+    history = []
+    for epoch in range(start_epoch, cfg.epochs):
+        model.train()
+        sampler.set_epoch(epoch)
+        gen = torch.Generator().manual_seed(cfg.seed * 100003 + epoch * 1009 + rank)
+        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{cfg.epochs}", disable=rank != 0, leave=False)
+        running, seen, t0 = None, 0, time.time()
+        for samples in bar:
+            persons = [persons_of_sample(s, "annotated") for s in samples]
+            persons = [p for p in persons if p.person_ids.numel()]
+            if not persons:
+                continue
+            scenes = [
+                build_scene(p.views, p.boxes, p.has_box, cfg.model.inputs, cfg.augment, gen) for p in persons
+            ]
+            outs = net(scenes)
+            losses = [
+                scene_loss(cfg.model, o, p, s.cameras) for o, p, s in zip(outs, persons, scenes, strict=True)
+            ]
+            loss = torch.stack(losses).mean()
+            optimiser.zero_grad(set_to_none=True)
+            loss.backward()
+            optimiser.step()
+            scheduler.step()
+            seen += len(persons)
+            value = float(loss.detach())
+            running = value if running is None else 0.95 * running + 0.05 * value
+            bar.set_postfix(loss=f"{running:.1f}", lr=f"{scheduler.get_last_lr()[0]:.1e}")
+        record = {
+            "epoch": epoch + 1,
+            "train_loss": running,
+            "scenes": seen,
+            "seconds": round(time.time() - t0, 1),
+        }
+        last = epoch + 1 == cfg.epochs
+        if rank == 0 and val_set is not None and ((epoch + 1) % cfg.val_every == 0 or last):
+            metrics = validate(model, annotations, val_set, [cfg.holdout_day])
+            record.update({k: v for k, v in metrics.items() if k != "result"})
+        if rank == 0:
+            score = record.get("val_mpjpe_cm")
+            improved = score is not None and score < best
+            best = score if improved else best
+            train_state = {
+                "epoch": epoch + 1,
+                "best": best,
+                "optimiser": optimiser.state_dict(),
+                "scheduler": scheduler.state_dict(),
+            }
+            save_checkpoint(out / "last", model, config_dict, train_state)
+            if improved or (val_set is None and last):
+                save_checkpoint(out / "best", model, config_dict, train_state)
+            with open(out / "log.jsonl", "a") as f:
+                f.write(json.dumps(record) + "\n")
+            print(json.dumps(record), file=sys.stderr)
+        history.append(record)
+        if world > 1:
+            dist.barrier()
+    if world > 1:
+        dist.destroy_process_group()
+    return {"history": history, "best_val_mpjpe_cm": best, "rank": rank}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m posenet.train",
+        description=__doc__.split("\n\n")[0]
+        + ". Options left out take the preset's value (see --preset); the resolved config is saved in the "
+        "run "
+        "folder and beside every checkpoint.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="Examples:\n"
+        + "\n".join(line for line in __doc__.splitlines() if line.strip().startswith(("python", "torchrun"))),
+    )
+    g = p.add_argument_group("data")
+    g.add_argument(
+        "--data", required=True, help="dataset root (MVOR layout: dayD/camC/{color,depth}/NNNNNN.png)"
+    )
+    g.add_argument("--annotations", help="MVOR-format annotation json (default: DATA/annotations.json)")
+    g.add_argument(
+        "--holdout-day", type=int, help="the fold's held-out day, used for validation (default: none)"
+    )
+    g.add_argument(
+        "--out", required=True, help="run folder: config.json, log.jsonl, last/ and best/ checkpoints"
+    )
+    g.add_argument("--subsample", type=int, help="reader subsampling (2: the paper's 320x240 from 640x480)")
+    g.add_argument("--max-frames", type=int, help="only the first N training frames (smoke runs)")
+    g.add_argument(
+        "--no-cache", dest="cache", action="store_false", default=None, help="do not keep frames in RAM"
+    )
+    g.add_argument("--num-workers", type=int, help="DataLoader workers (needs --no-cache)")
+    g = p.add_argument_group("preset and model")
+    g.add_argument(
+        "--preset",
+        default="cpu",
+        choices=sorted(PRESETS),
+        help="cpu (default): 96x96 person crops, U-Net base 16, bf16, 4 scenes per step, cosine decay; "
+        "paper: full 320x240 images, 288x208 random crops, batch 1 scene, 200 epochs",
+    )
+    g.add_argument("--modality", choices=("rgbd", "rgb", "depth"), help="network input (paper: rgbd)")
+    g.add_argument(
+        "--extra-depth", action=argparse.BooleanOptionalAction, help="relative depth + valid channels"
+    )
+    g.add_argument("--crop-size", type=int, help="cpu preset: side of the person crop fed to the U-Net")
+    g.add_argument("--base", type=int, help="U-Net width (channels of its first level)")
+    g.add_argument("--depth", type=int, help="U-Net downsamplings")
+    g.add_argument(
+        "--loss", choices=("3d", "2d"), help="3d: MPJPE through the cameras (paper); 2d: the baseline"
+    )
+    g.add_argument("--bf16", action=argparse.BooleanOptionalAction, help="bf16 autocast for the U-Net")
+    g.add_argument(
+        "--channels-last", action=argparse.BooleanOptionalAction, help="channels_last memory format"
+    )
+    g = p.add_argument_group("optimisation")
+    g.add_argument("--epochs", type=int, help="passes over the training frames")
+    g.add_argument("--lr", type=float, help="Adam learning rate (paper: 1e-3)")
+    g.add_argument("--scenes-per-step", type=int, help="scenes per optimiser step (paper: 1)")
+    g.add_argument(
+        "--decay-start", type=float, help="fraction of training after which the LR decays to 0 (cosine)"
+    )
+    g.add_argument("--val-every", type=int, help="epochs between validations on the held-out day")
+    g.add_argument("--seed", type=int)
+    g = p.add_argument_group("augmentation (each switchable)")
+    g.add_argument("--flip", action=argparse.BooleanOptionalAction, help="horizontal flip, p = 0.5")
+    g.add_argument(
+        "--crop", action=argparse.BooleanOptionalAction, help="random crop (cpu: crop shift/scale)"
+    )
+    g.add_argument("--rotate", type=float, help="max rotation in degrees (0 disables; paper: 15)")
+    g.add_argument(
+        "--color", action=argparse.BooleanOptionalAction, help="brightness/contrast/saturation jitter"
+    )
+    g = p.add_argument_group("runtime")
+    g.add_argument("--threads", type=int, help="torch CPU threads")
+    g.add_argument("--device", help="cpu or cuda (default: cuda if available)")
+    g.add_argument(
+        "--resume", action="store_true", help="continue the run in --out from last/ (else a fresh run)"
+    )
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    out = Path(args.out)
+    if args.resume:
+        saved = out / "config.json"
+        if not saved.is_file():
+            raise FileNotFoundError(f"--resume: {saved} does not exist; start the run without --resume")
+        cfg = TrainConfig.from_dict(json.loads(saved.read_text()))
+        for key in ("epochs", "val_every", "threads", "num_workers", "device"):
+            if getattr(args, key, None) is not None:
+                setattr(cfg, key, getattr(args, key))
+    else:
+        if (out / "last").exists():
+            raise FileExistsError(
+                f"{out} already holds a run; pass --resume to continue it or choose another --out"
+            )
+        cfg = resolve_config(args)
+    result = train(cfg)
+    if result["history"] and result["rank"] == 0:
+        print(json.dumps({"best_val_mpjpe_cm": result["best_val_mpjpe_cm"]}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

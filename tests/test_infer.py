@@ -1,0 +1,98 @@
+import dataclasses
+
+import cv2
+import pytest
+import torch
+from tiny_scenes import write_dataset
+
+from posenet.checkpoint import DEFAULT_WEIGHTS, load_checkpoint, save_checkpoint
+from posenet.data.mvor import MvorDataset
+from posenet.infer import PoseEstimator
+from posenet.inputs import InputConfig
+from posenet.model import ModelConfig, PoseNet
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tiny_infer")
+    sample = MvorDataset(root, write_dataset(root, {1: 1}, persons=3, seed=1))[0]
+    views = [(v.color, v.depth, v.camera) for v in sample.views]
+    boxes = [[b if b is None else b.tolist() for b in sample.person_boxes(p)] for p in range(3)]
+    boxes[2][1] = None  # one person unseen in one view
+    return views, boxes
+
+
+def _estimator(mode: str, bf16: bool = False, seed: int = 0) -> PoseEstimator:
+    torch.manual_seed(seed)
+    inputs = InputConfig(mode=mode, crop_size=32, image_size=(80, 60), train_crop=(64, 48))
+    model = PoseNet(ModelConfig(inputs=inputs, base=8, depth=2, bf16=bf16))
+    with torch.no_grad():  # non-trivial BatchNorm statistics, so eval mode differs from train mode
+        for m in model.modules():
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.running_mean.uniform_(-0.2, 0.2)
+                m.running_var.uniform_(0.5, 2.0)
+    return PoseEstimator(model)
+
+
+@pytest.mark.parametrize("mode", ["crop", "full"])
+def test_batched_equals_per_person(scene, mode):
+    views, boxes = scene
+    est = _estimator(mode)
+    together = est.predict(views, boxes)
+    alone = [est.predict(views, [b]) for b in boxes]
+    assert together.joints.shape == (3, 10, 3) and together.confidence.shape == (3, 10)
+    torch.testing.assert_close(together.joints, torch.cat([a.joints for a in alone]), atol=1e-3, rtol=1e-5)
+    torch.testing.assert_close(
+        together.confidence, torch.cat([a.confidence for a in alone]), atol=1e-3, rtol=1e-4
+    )
+    assert together.has_points.all() and (together.confidence > 0).all()
+
+
+def test_any_image_size_keeps_the_cameras_right(scene):
+    views, boxes = scene
+    est = _estimator("full")
+    big = []
+    for color, depth, cam in views:  # the same scene at twice the resolution
+        up = [cv2.resize(img, (160, 120), interpolation=cv2.INTER_NEAREST) for img in (color, depth)]
+        big.append((*up, cam.scale(2.0)))
+    big_boxes = [[None if b is None else [(x + 0.5) * 2 - 0.5 for x in b] for b in per] for per in boxes]
+    a, b = est.predict(views, boxes), est.predict(big, big_boxes)
+    torch.testing.assert_close(a.joints, b.joints, atol=1e-2, rtol=1e-5)
+
+
+def test_heatmaps_for_pictures_and_empty_scene(scene):
+    views, boxes = scene
+    pred = _estimator("crop").predict(views, boxes, return_heatmaps=True)
+    assert pred.heatmaps.shape == (3, 3, 10, 32 * 32) and pred.valid.shape == (3, 3, 32 * 32)
+    assert not pred.valid[2, 1].any()  # no box, no votes
+    empty = _estimator("crop").predict(views, [])
+    assert empty.joints.shape == (0, 10, 3)
+
+
+def test_bad_boxes_raise(scene):
+    views, _ = scene
+    est = _estimator("crop")
+    with pytest.raises(ValueError, match="one per view"):
+        est.predict(views, [[None, None]])
+    with pytest.raises(ValueError, match="xyxy"):
+        est.predict(views, [[[10, 10, 5, 20], None, None]])
+
+
+def test_checkpoint_round_trip(scene, tmp_path):
+    views, boxes = scene
+    est = _estimator("crop", bf16=True, seed=3)
+    cfg = {"model": dataclasses.asdict(est.model.config), "preset": "test", "subsample": 1}
+    save_checkpoint(tmp_path / "best", est.model, cfg)
+    again = PoseEstimator.from_checkpoint(tmp_path / "best")
+    torch.testing.assert_close(again.predict(views, boxes).joints, est.predict(views, boxes).joints)
+    model, config = load_checkpoint(tmp_path)  # a run folder: its best/
+    assert config["preset"] == "test" and model.config.inputs.crop_size == 32
+
+
+def test_missing_default_weights_say_how_to_get_them():
+    if DEFAULT_WEIGHTS.is_file():
+        pytest.skip("default weights are shipped in this checkout")
+    with pytest.raises(FileNotFoundError, match="posenet.train"):
+        PoseEstimator.from_checkpoint(None)
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        PoseEstimator.from_checkpoint("/nonexistent/model.safetensors")

@@ -1,0 +1,106 @@
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from tiny_scenes import write_dataset
+
+from posenet.augment import AugmentConfig
+from posenet.data.mvor import MvorDataset
+from posenet.inputs import InputConfig, build_scene, persons_of_sample
+from posenet.loss import mpjpe
+from posenet.model import ModelConfig, PoseNet
+from posenet.predict import main as predict_main
+from posenet.train import lr_factor
+from posenet.train import main as train_main
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = ["--subsample", "1", "--crop-size", "32", "--base", "8", "--threads", "1"]
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tiny")
+    return root, write_dataset(root, {1: 4, 2: 3}, persons=2, seed=0)
+
+
+@pytest.mark.parametrize("mode,aggregation", [("crop", "3d"), ("full", "3d"), ("crop", "2d")])
+def test_one_training_step_lowers_the_loss(tiny, mode, aggregation):
+    torch.manual_seed(0)
+    root, ann = tiny
+    sample = MvorDataset(root, ann, days=[1])[0]
+    inputs = InputConfig(mode=mode, crop_size=32, image_size=(80, 60), train_crop=(64, 48))
+    cfg = ModelConfig(
+        inputs=inputs, base=8, depth=2 if mode == "crop" else 2, aggregation=aggregation, bf16=False
+    )
+    model = PoseNet(cfg)
+    persons = persons_of_sample(sample)
+    g = torch.Generator().manual_seed(0)
+    scene = build_scene(persons.views, persons.boxes, persons.has_box, inputs, AugmentConfig(), g)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+
+    def loss_now():
+        return mpjpe(model(scene).joints, persons.poses, persons.valid)
+
+    before = loss_now()
+    opt.zero_grad()
+    before.backward()
+    assert all(torch.isfinite(p.grad).all() for p in model.parameters() if p.grad is not None)
+    opt.step()
+    after = loss_now()
+    assert after.item() < before.item()
+
+
+def test_lr_schedule():
+    assert lr_factor(0, 100, 0.75) == 1.0 and lr_factor(74, 100, 0.75) == 1.0
+    assert 0.4 < lr_factor(87, 100, 0.75) < 0.6 and lr_factor(100, 100, 0.75) == 0.0
+    assert lr_factor(99, 100, 1.0) == 1.0
+
+
+def _run(args, **kw):
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "OMP_NUM_THREADS": "1"}
+    r = subprocess.run(args, cwd=REPO, env=env, capture_output=True, text=True, timeout=120, **kw)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return r
+
+
+def test_cli_train_resume_predict(tiny, tmp_path):
+    # in-process through the CLIs' main(argv), to keep the test fast; the subprocess path is tested with
+    # torchrun
+    root, ann = tiny
+    run = tmp_path / "run"
+    base = ["--data", str(root), "--holdout-day", "2", "--out", str(run)]
+    assert train_main([*base, *TINY[:-2], "--epochs", "1", "--val-every", "1"]) == 0
+    for ckpt in ("last", "best"):
+        assert (run / ckpt / "model.safetensors").is_file()
+        saved = json.loads((run / ckpt / "config.json").read_text())
+        assert saved["preset"] == "cpu" and saved["model"]["inputs"]["crop_size"] == 32
+        assert saved["data_description"]["train_days"] == [1]
+    assert train_main([*base, "--resume", "--epochs", "2"]) == 0
+    log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    assert [r["epoch"] for r in log] == [1, 2] and all("val_mpjpe_cm" in r for r in log)
+    pred = tmp_path / "pred.json"
+    args = ["--data", str(root), "--annotations", str(ann), "--checkpoint", str(run / "best"), "--days", "2"]
+    assert predict_main([*args, "--out", str(pred)]) == 0
+    preds = json.loads(pred.read_text())
+    assert len(preds) == 6 and all(len(p["keypoints3D"]) == 30 for p in preds)
+    # a fresh run into an existing folder must not silently overwrite it
+    with pytest.raises(FileExistsError, match="--resume"):
+        train_main([*base, *TINY[:-2]])
+
+
+def test_torchrun_ddp_gloo_two_processes(tiny, tmp_path):
+    root, _ = tiny
+    run = tmp_path / "ddp"
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "-m", "posenet.train",
+           "--data", str(root), "--holdout-day", "2", "--out", str(run), *TINY,
+           "--epochs", "1", "--device", "cpu"]  # fmt: skip
+    _run(cmd)
+    log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    assert len(log) == 1  # only rank 0 logs and saves
+    # 4 training frames split over 2 processes: rank 0 saw 2 of them
+    assert log[0]["scenes"] == 2
+    assert (run / "last" / "model.safetensors").is_file()
