@@ -292,7 +292,11 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=(
             'Predictions: a JSON list of {"image_ids": str, "person_id": int, "keypoints3D": [30 floats]}\n'
             "(mm, camera-0 frame, MVOR joint order), matched to the ground truth by\n"
-            "(image_ids, person_id).\n\n"
+            "(image_ids, person_id). Ground-truth joints with flag 0 and poses without a prediction\n"
+            "are left out of the means and reported as counts.\n\n"
+            "Tables (cm): MPJPE per joint type over all 10 joints (left and right averaged; Average =\n"
+            "mean of the six types; Overall = MPJPE over all annotated joints), and MVOR's per-support\n"
+            "table (shoulder, hip, elbow, wrist by the number of views with a box of the person).\n\n"
             "Cross-validation: train one model per held-out day, predict its held-out day, and pass\n"
             "all the prediction files (or one file covering every day) with --folds. Each day is then\n"
             "scored on its own and the tables show the mean (± population std) over the days, as in\n"
