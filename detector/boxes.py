@@ -4,8 +4,9 @@ Every box in this project is ``xyxy`` in pixels of its image, in ``posenet.camer
 origin is the *centre* of the top-left pixel, so an image of width W spans ``[-0.5, W - 0.5]``. The other
 formats:
 
-- **COCO** ``[x, y, w, h]`` (MVOR's annotations and COCO results files): x, y is the top-left *corner* of the
-  box with the origin at the top-left *corner* of the image. So ``x0 = x - 0.5`` and ``x1 = x + w - 0.5``.
+- **COCO** ``[x, y, w, h]`` (MVOR's annotations and COCO results files): ``x0 = x``, ``x1 = x + w``. MVOR's
+  pixel numbers are already in the camera convention (its 2D keypoints agree with its own projections there),
+  so there is no half-pixel shift: the same rule as ``posenet.data.mvor``.
 - **DETR** ``(cx, cy, w, h)`` normalised by the image size, with the image spanning ``[0, 1]``: ``cx = (xc +
   0.5) / W``.
 
@@ -34,17 +35,17 @@ def _stack(parts: list, like: ArrayLike) -> ArrayLike:
 
 
 def coco_to_xyxy(boxes: ArrayLike) -> ArrayLike:
-    """COCO ``[x, y, w, h]`` (corner origin) ``(..., 4)`` to xyxy pixels (centre origin)."""
+    """COCO ``[x, y, w, h]`` ``(..., 4)`` to xyxy pixels."""
     _check("boxes", boxes)
     x, y, w, h = (boxes[..., i] for i in range(4))
-    return _stack([x - 0.5, y - 0.5, x + w - 0.5, y + h - 0.5], boxes)
+    return _stack([x, y, x + w, y + h], boxes)
 
 
 def xyxy_to_coco(boxes: ArrayLike) -> ArrayLike:
-    """xyxy pixels (centre origin) ``(..., 4)`` to COCO ``[x, y, w, h]`` (corner origin)."""
+    """xyxy pixels ``(..., 4)`` to COCO ``[x, y, w, h]``."""
     _check("boxes", boxes)
     x0, y0, x1, y1 = (boxes[..., i] for i in range(4))
-    return _stack([x0 + 0.5, y0 + 0.5, x1 - x0, y1 - y0], boxes)
+    return _stack([x0, y0, x1 - x0, y1 - y0], boxes)
 
 
 def xyxy_to_cxcywh_norm(boxes: ArrayLike, width: int, height: int) -> ArrayLike:

@@ -3,7 +3,7 @@
     python -m detector.predict --data DIR --annotations A.json [--checkpoint CKPT] [--days 4] --out BOXES.json
 
 Output: a COCO results list, ``{"image_id", "category_id": 1, "bbox": [x, y, w, h], "score"}`` in full-image
-pixels (COCO's corner-origin convention, ``detector.boxes``), which ``detector.evaluate`` scores. Every query
+pixels (``detector.boxes``), which ``detector.evaluate`` scores. Every query
 above ``--score-threshold`` is kept (a low threshold is what COCO AP expects).
 """
 

@@ -24,9 +24,9 @@ def test_coco_round_trip(xyxy):
     np.testing.assert_allclose(B.xyxy_to_coco(B.coco_to_xyxy(coco)), coco, atol=1e-9)
 
 
-def test_coco_full_image_box():
-    """COCO's [0, 0, W, H] covers the whole image, i.e. pixel centres -0.5 .. W - 0.5."""
-    np.testing.assert_allclose(B.coco_to_xyxy(np.array([0.0, 0, 640, 480])), [-0.5, -0.5, 639.5, 479.5])
+def test_coco_matches_the_mvor_reader():
+    """The MVOR reader's rule: (x, y, w, h) -> (x, y, x + w, y + h), no half-pixel shift."""
+    np.testing.assert_allclose(B.coco_to_xyxy(np.array([287.0, 207, 134.5, 273])), [287, 207, 421.5, 480])
 
 
 def test_detr_round_trip_numpy_and_torch(xyxy):

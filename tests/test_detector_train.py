@@ -37,14 +37,14 @@ def write_dataset(root, days=(1, 2), per_day=4, seed=0) -> str:
                 ax, ay = rng.uniform(8, 14), rng.uniform(18, 24)
                 cv2.ellipse(color, (int(cx), int(cy)), (int(ax), int(ay)), 0, 0, 360, (230, 40, 40), -1)
                 cv2.ellipse(depth, (int(cx), int(cy)), (int(ax), int(ay)), 0, 0, 360, 2000, -1)
-                x0, y0 = int(cx) - int(ax) - 0.5, int(cy) - int(ay) - 0.5
+                x0, y0 = int(cx) - int(ax) - 0.5, int(cy) - int(ay) - 0.5  # pixel-centre convention
                 anns.append(
                     {
                         "id": len(anns),
                         "image_id": day * 1000 + i,
                         "category_id": "1",
                         "person_id": -1,
-                        "bbox": [x0 + 0.5, y0 + 0.5, 2 * int(ax) + 1, 2 * int(ay) + 1],
+                        "bbox": [x0, y0, 2 * int(ax) + 1, 2 * int(ay) + 1],
                     }
                 )
             name = f"day{day}/cam1/color/{i:06d}.png"

@@ -14,30 +14,34 @@ from posenet.cameras import Camera
 W, H = 320, 240
 
 
-def ring_cameras(n: int, radius: float = 3000.0) -> list[Camera]:
-    """n cameras on a circle of ``radius`` mm around the origin of camera 0's floor point, looking at its
-    centre.
+def ring_cameras(n: int, radius: float = 3000.0, height: float = 0.0) -> list[Camera]:
+    """n cameras on a circle of ``radius`` mm around a scene centre, ``height`` mm above it, looking at it.
 
-    Camera 0 is the reference: its T(0->0) is the identity. The scene centre lies 3 m in front of camera 0.
+    Extrinsics are T(v->0): camera 0 is the reference (identity). The scene centre lies ``radius`` mm in
+    front of camera 0 (and ``height`` mm below it).
     """
     centre = np.array([0.0, 0.0, radius])
-    cams = []
+    poses = []
     for i in range(n):
         a = 2 * np.pi * i / n
-        # Camera i sits on the circle, rotated by a around the vertical (y) axis through the scene centre.
-        R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-        t = centre - R @ np.array([0.0, 0.0, radius])
+        yaw = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+        pos = centre + yaw @ np.array([0.0, 0.0, -radius]) + np.array([0.0, -height, 0.0])  # -y is up
+        f = (centre - pos) / np.linalg.norm(centre - pos)
+        x = np.cross([0.0, 1.0, 0.0], f)
+        x /= np.linalg.norm(x)
         T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R, t
-        cams.append(Camera.create(250.0, 250.0, (W - 1) / 2, (H - 1) / 2, T, size=(W, H)))
-    return cams
+        T[:3, :3], T[:3, 3] = np.stack([x, np.cross(f, x), f], axis=1), pos  # columns: camera axes
+        poses.append(T)
+    to_ref = np.linalg.inv(poses[0])
+    return [Camera.create(250.0, 250.0, (W - 1) / 2, (H - 1) / 2, to_ref @ T, size=(W, H)) for T in poses]
 
 
-def render(cams: list[Camera], people: np.ndarray, visible=None, background: int = 0):
+def render(cams: list[Camera], people: np.ndarray, visible=None, background: int = 0, min_seen: float = 0.0):
     """Boxes and depth images of ``people (P, 3)`` (mm, reference frame), each a 500 x 1700 mm upright slab.
 
-    ``visible[v]`` lists the people drawn in view v. Returns per view (boxes (K, 4), depth (H, W) uint16, ids
-    (K,)).
+    ``visible[v]`` lists the people drawn in view v; a box is kept only where at least ``min_seen`` of its
+    pixels show that person (0 keeps boxes of hidden people too).
+    Returns per view (boxes (K, 4), depth (H, W) uint16, ids (K,)).
     """
     out = []
     for v, cam in enumerate(cams):
@@ -54,8 +58,12 @@ def render(cams: list[Camera], people: np.ndarray, visible=None, background: int
             x0, y0 = max(int(np.ceil(box[0])), 0), max(int(np.ceil(box[1])), 0)
             x1, y1 = min(int(np.floor(box[2])), W - 1), min(int(np.floor(box[3])), H - 1)
             depth[y0 : y1 + 1, x0 : x1 + 1] = round(z)
-            boxes.append((p, box))
-        boxes.sort(key=lambda pb: pb[0])
+            boxes.append((p, box, (y0, y1, x0, x1), round(z)))
+        if min_seen > 0:
+            seen = [(depth[a : b + 1, c : d + 1] == z).mean() if b >= a and d >= c else 0.0
+                    for _, _, (a, b, c, d), z in boxes]  # fmt: skip
+            boxes = [pb for pb, f in zip(boxes, seen, strict=True) if f >= min_seen]
+        boxes = sorted((p, box) for p, box, _, _ in boxes)
         out.append(
             (
                 np.array([b for _, b in boxes], np.float32).reshape(-1, 4),
@@ -189,3 +197,39 @@ def test_bad_input_raises():
         match_boxes([np.zeros((0, 4))] * 3, [np.zeros((H, W), np.uint16)] * 3, cams)
     with pytest.raises(ValueError, match="depth"):
         box_depths(np.zeros((1, 4)), np.zeros((2, 3, 4)))
+
+
+def test_association_counts_found_split_merged():
+    from detector.association import frame_association
+
+    cams = ring_cameras(3)
+    people = np.array([[-600.0, 0.0, 3000.0], [700.0, 0.0, 3300.0]])
+    views = render(cams, people)
+    boxes = [b.astype(np.float64) for b, _, _ in views]
+    ids = [i for _, _, i in views]
+    groups = match_boxes(boxes, [d for _, d, _ in views], cams)
+    out = frame_association(boxes, ids, boxes, groups)
+    assert (out["found"], out["complete"], out["split"], out["merged"], out["missed"]) == (2, 2, 0, 0, 0)
+    assert out["iou_sum"] == pytest.approx(2.0)  # every person: IoU 1 in all 3 views
+
+    from detector.matching import Group
+
+    c = np.zeros(3)
+    # Person 0 split over two groups; person 1 found.
+    split = [Group((0, 0, -1), c, 0.0), Group((-1, -1, 0), c, 0.0), Group((1, 1, 1), c, 0.0)]
+    out = frame_association(boxes, ids, boxes, split)
+    assert (out["split"], out["found"], out["complete"], out["merged"]) == (1, 1, 1, 0)
+    # Person 1's box in view 2 not detected: found, but not complete.
+    partial = [boxes[0], boxes[1], boxes[2][:1]]
+    groups = match_boxes(partial, [d for _, d, _ in views], cams)
+    out = frame_association(boxes, ids, partial, groups)
+    assert (out["found"], out["complete"]) == (2, 1)
+    # Person 0 seen in views 0 and 1, person 1 in view 2 only, all three boxes in one group -> both merged.
+    seen = render(cams, people, visible=[[0], [0], [1]])
+    b2, ids2 = [b.astype(np.float64) for b, _, _ in seen], [i for _, _, i in seen]
+    out = frame_association(b2, ids2, b2, [Group((0, 0, 0), c, 0.0)])
+    assert (out["merged"], out["found"], out["split"]) == (2, 0, 0)
+    # Nothing detected -> both missed; the paper's score is 0.
+    empty = [np.zeros((0, 4))] * 3
+    out = frame_association(boxes, ids, empty, [])
+    assert out["missed"] == 2 and out["iou_sum"] == 0.0

@@ -1,0 +1,65 @@
+"""Detector speed: milliseconds per view of each preset, all views of a frame in one forward pass.
+
+    HF_HUB_OFFLINE=1 nice python benchmarks/detector_speed.py [--presets cpu paper] [--views 3] [--threads 2]
+
+Random weights (speed does not depend on them), 640x480 RGB views resized by each preset's own preprocessing,
+``PersonDetector.detect`` end to end (preprocessing, DETR, decoding). Prints one JSON line per preset.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+import torch
+
+from detector.infer import PersonDetector
+from detector.model import build_detector, preset
+
+
+def main(argv: list[str] | None = None) -> list[dict]:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--presets", nargs="+", default=["cpu", "paper"], choices=["cpu", "paper"])
+    p.add_argument("--views", type=int, default=3, help="views per forward pass (one MVOR frame: 3)")
+    p.add_argument("--repeats", type=int, default=5, help="timed passes (the median is reported)")
+    p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--device", default="cpu")
+    args = p.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    rng = np.random.default_rng(0)
+    views = [rng.integers(0, 255, (480, 640, 3), dtype=np.uint8) for _ in range(args.views)]
+    rows = []
+    for name in args.presets:
+        cfg = preset(name)
+        torch.manual_seed(0)
+        detector = PersonDetector(build_detector(cfg), cfg, args.device)
+        detector.detect(views)  # warm-up (allocations, lazy init)
+        times = []
+        for _ in range(args.repeats):
+            if args.device.startswith("cuda"):
+                torch.cuda.synchronize()
+            t = time.perf_counter()
+            detector.detect(views)
+            if args.device.startswith("cuda"):
+                torch.cuda.synchronize()
+            times.append(time.perf_counter() - t)
+        n_params = sum(q.numel() for q in detector.model.parameters())
+        row = {
+            "preset": name,
+            "params_M": round(n_params / 1e6, 1),
+            "input": f"{cfg.input_width}x{cfg.input_width * 3 // 4}",
+            "views": args.views,
+            "threads": args.threads,
+            "device": args.device,
+            "ms_per_frame": round(1000 * float(np.median(times)), 1),
+            "ms_per_view": round(1000 * float(np.median(times)) / args.views, 1),
+        }
+        print(json.dumps(row))
+        rows.append(row)
+    return rows
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,182 @@
+"""How well boxes are grouped into persons across views, as in the paper's evaluation of its matcher.
+
+    python -m detector.association --data DIR --annotations A.json [--predictions BOXES.json] [--days 4]
+
+Without ``--predictions`` the matcher groups the reference boxes; with it, the detected boxes (score at least
+``--score-threshold``). For every annotated person (``person_id >= 0``) in every frame:
+- the paper's score: match persons to groups by IoU averaged over the V views (IoU 0 where the person or the
+  group has no box), one to one (Hungarian); ``mean_iou`` averages the matched scores over persons.
+- counts: in each view, detected boxes are paired with annotated boxes (Hungarian, IoU >= 0.5). A person is
+  **missed** when none of its boxes is detected, **split** when its detected boxes lie in two or more groups,
+  **merged** when its group also holds another person's box, and **found** otherwise (``complete`` when that
+  group also has a box in every view where the person has one). missed + split + merged + found = persons.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+from tqdm import tqdm
+
+from detector.boxes import coco_to_xyxy, iou_xyxy
+from detector.matching import Group, match_boxes
+
+COUNTS = ("persons", "found", "complete", "missed", "split", "merged", "groups")
+
+
+def frame_association(
+    gt_boxes: list[np.ndarray],
+    gt_ids: list[np.ndarray],
+    pred_boxes: list[np.ndarray],
+    groups: list[Group],
+    iou_threshold: float = 0.5,
+) -> dict:
+    """Counts and the paper's IoU score of one frame.
+
+    Args:
+        gt_boxes: per view, ``(G_v, 4)`` annotated boxes (xyxy); gt_ids: per view ``(G_v,)`` person ids
+            (-1: a box without identity, which may absorb a detection but is not a person).
+        pred_boxes: per view, ``(K_v, 4)`` boxes that were grouped; groups: the matcher's groups.
+    """
+    V = len(gt_boxes)
+    persons = sorted({int(i) for ids in gt_ids for i in ids if i >= 0})
+    # Which group holds each predicted box: owner[v][k].
+    owner = [np.full(len(b), -1) for b in pred_boxes]
+    for gi, g in enumerate(groups):
+        for v, k in enumerate(g.indices):
+            if k >= 0:
+                owner[v][k] = gi
+    # Per view, pair detections with annotated boxes; record the group of each person's detected boxes.
+    person_groups: dict[int, set] = defaultdict(set)
+    group_persons: dict[int, set] = defaultdict(set)
+    for v in range(V):
+        if len(gt_boxes[v]) == 0 or len(pred_boxes[v]) == 0:
+            continue
+        iou = iou_xyxy(gt_boxes[v], pred_boxes[v])  # (G_v, K_v)
+        rows, cols = linear_sum_assignment(-iou)
+        for r, c in zip(rows, cols, strict=True):
+            pid = int(gt_ids[v][r])
+            if iou[r, c] >= iou_threshold and pid >= 0:
+                person_groups[pid].add(int(owner[v][c]))
+                group_persons[int(owner[v][c])].add(pid)
+    out = dict.fromkeys(COUNTS, 0)
+    out["persons"], out["groups"] = len(persons), len(groups)
+    for p in persons:
+        gs = person_groups.get(p, set())
+        if not gs:
+            out["missed"] += 1
+        elif len(gs) > 1:
+            out["split"] += 1
+        elif len(group_persons[next(iter(gs))]) > 1:
+            out["merged"] += 1
+        else:
+            out["found"] += 1
+            g = groups[next(iter(gs))]
+            views = [v for v in range(V) if p in set(gt_ids[v].tolist())]
+            out["complete"] += all(g.indices[v] >= 0 for v in views)
+    out["iou_sum"] = _paper_score(gt_boxes, gt_ids, pred_boxes, groups, persons)
+    return out
+
+
+def _paper_score(gt_boxes, gt_ids, pred_boxes, groups, persons) -> float:
+    """Sum over persons of the IoU, averaged over all V views, of the group matched to each (Hungarian)."""
+    if not persons or not groups:
+        return 0.0
+    V = len(gt_boxes)
+    score = np.zeros((len(persons), len(groups)))  # (P, G)
+    for v in range(V):
+        pid = {int(i): j for j, i in enumerate(gt_ids[v]) if i >= 0}
+        for pi, p in enumerate(persons):
+            if p not in pid:
+                continue
+            for gi, g in enumerate(groups):
+                if g.indices[v] >= 0:
+                    a = gt_boxes[v][pid[p]][None]
+                    score[pi, gi] += iou_xyxy(a, pred_boxes[v][g.indices[v]][None])[0, 0]
+    score /= V
+    rows, cols = linear_sum_assignment(-score)
+    return float(score[rows, cols].sum())
+
+
+def results_by_image(predictions: list[dict], score_threshold: float) -> dict[int, np.ndarray]:
+    """COCO results to ``{image_id: (K, 4) xyxy}`` keeping scores >= ``score_threshold``."""
+    out: dict[int, list] = defaultdict(list)
+    for p in predictions:
+        if p.get("score", 1.0) >= score_threshold:
+            out[int(p["image_id"])].append(p["bbox"])
+    return {k: coco_to_xyxy(np.asarray(v, np.float64).reshape(-1, 4)) for k, v in out.items()}
+
+
+def evaluate_association(
+    samples,
+    predictions: list[dict] | None = None,
+    score_threshold: float = 0.5,
+    threshold_mm: float = 750.0,
+    progress: bool = True,
+) -> dict:
+    """Association metrics over ``samples`` (``Sample``s with depth); see the module docstring.
+
+    ``predictions`` None groups the reference boxes; else the COCO results' boxes of each view.
+    """
+    detected = None if predictions is None else results_by_image(predictions, score_threshold)
+    totals = dict.fromkeys(COUNTS, 0)
+    totals["iou_sum"] = 0.0
+    for sample in tqdm(samples, desc="associate", unit="frame", disable=not progress):
+        gt_boxes = [np.asarray(v.boxes, np.float64).reshape(-1, 4) for v in sample.views]
+        gt_ids = [np.asarray(v.box_person_ids) for v in sample.views]
+        if detected is None:
+            pred = gt_boxes
+        else:
+            pred = [detected.get(int(v.image_id), np.zeros((0, 4))) for v in sample.views]
+        depths = []
+        for v in sample.views:
+            if v.depth is None:
+                raise ValueError(f"frame {sample.id} has no depth image: load the dataset with depth")
+            depths.append(v.depth)
+        groups = match_boxes(pred, depths, sample.cameras, threshold_mm)
+        for k, val in frame_association(gt_boxes, gt_ids, pred, groups).items():
+            totals[k] += val
+    n = max(totals["persons"], 1)
+    totals["mean_iou"] = round(totals.pop("iou_sum") / n, 4)
+    for k in ("found", "complete", "missed", "split", "merged"):
+        totals[f"{k}_rate"] = round(totals[k] / n, 4)
+    return totals
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(
+        prog="python -m detector.association",
+        description="Group boxes across views with the 3D matcher and count persons found, split and merged.",
+    )
+    parser.add_argument("--data", required=True, help="dataset root (needs the depth images)")
+    parser.add_argument("--annotations", required=True, help="MVOR-format annotation json")
+    parser.add_argument(
+        "--predictions", help="COCO results of detector.predict (default: the reference boxes)"
+    )
+    parser.add_argument("--days", type=int, nargs="+", help="only these recording days")
+    parser.add_argument("--score-threshold", type=float, default=0.5, help="lowest detection score used")
+    parser.add_argument("--threshold-mm", type=float, default=750.0, help="the matcher's t (paper: 75 cm)")
+    parser.add_argument("--out", help="also write the metrics to this json file")
+    args = parser.parse_args(argv)
+
+    from posenet.data.mvor import MvorDataset
+
+    samples = MvorDataset(args.data, args.annotations, subsample=1, modalities=("depth",), days=args.days)
+    predictions = None
+    if args.predictions:
+        predictions = json.loads(Path(args.predictions).read_text())
+    metrics = evaluate_association(samples, predictions, args.score_threshold, args.threshold_mm)
+    metrics["boxes"] = "detected" if predictions is not None else "reference"
+    print(json.dumps(metrics, indent=2))
+    if args.out:
+        Path(args.out).write_text(json.dumps(metrics, indent=2))
+    return metrics
+
+
+if __name__ == "__main__":
+    main()
