@@ -107,6 +107,7 @@ def rasterize(prims: list[Primitive], K: Intrinsics) -> GBuffer:
     bounds = np.append(starts, len(flat))
     vv, uu = np.divmod(order, W)
     z = depth.ravel()[order].astype(np.float32)
+    z[~np.isfinite(z)] = 0  # pixels that see nothing get no normal
     x, y = du.astype(np.float32)[uu] * z, dv.astype(np.float32)[vv] * z  # camera-frame surface points
     for k, start in enumerate(starts):  # one batch of pixels per visible primitive
         i = sorted_ids[start]

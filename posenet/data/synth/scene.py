@@ -64,7 +64,10 @@ class Frame:
 class VisibilityConfig:
     min_pixels: int = 350  # fewer visible pixels than this at 640x480: no box ("almost hidden")
     min_fraction: float = 0.12  # or less than this fraction of the person's unoccluded silhouette
-    kp_depth_tol: float = 120.0  # mm: a joint counts as visible if the surface there is this close in front
+    # mm per joint (MVOR order): a joint is visible if the surface at its pixel is at most this far in
+    # front of it, i.e. about the thickness of the body part around it (the head point sits inside the
+    # head, the hips inside the pelvis or a gown); a nearer surface, even of the same person, occludes it.
+    kp_depth_tol: tuple[float, ...] = (170, 120, 130, 130, 230, 230, 110, 110, 100, 100)
 
 
 @dataclass
@@ -177,9 +180,8 @@ def project_keypoints(
     ui, vi = np.round(u).astype(int), np.round(v).astype(int)
     inside = (pc[:, 2] > 0) & (ui >= 0) & (ui < K.width) & (vi >= 0) & (vi < K.height)
     uc, vc = np.clip(ui, 0, K.width - 1), np.clip(vi, 0, K.height - 1)
-    own = owner[vc, uc] == index
-    near = zbuf[vc, uc] > pc[:, 2] - vis.kp_depth_tol
-    flag = np.where(inside, np.where(own | near, 2, 1), 0)
+    near = zbuf[vc, uc] > pc[:, 2] - np.asarray(vis.kp_depth_tol)
+    flag = np.where(inside, np.where(near, 2, 1), 0)
     out = np.stack([u, v, flag], axis=1)
     out[flag == 0, :2] = 0  # MVOR writes (0, 0, 0) for joints it does not annotate
     return out

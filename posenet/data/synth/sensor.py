@@ -88,7 +88,8 @@ def simulate_depth(
     # Disparity quantisation.
     d = np.round(fb / zn / cfg.disparity_step) * cfg.disparity_step
     zq = fb / np.maximum(d, 1e-6)
-    out = np.where(valid & ~holes, np.round(zq), 0)
+    in_range = (zq >= cfg.min_range) & (zq <= cfg.max_range)
+    out = np.where(valid & ~holes & in_range, np.round(zq), 0)
     out[:, : cfg.left_band] = 0
     return np.clip(out, 0, 65535).astype(np.uint16)
 

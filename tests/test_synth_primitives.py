@@ -1,0 +1,122 @@
+"""Ray-primitive intersections and normals of the synthetic renderer, against their implicit surfaces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from posenet.data.synth.primitives import (
+    BOX,
+    CAPSULE,
+    ELLIPSOID,
+    HIT,
+    box,
+    capsule,
+    ellipsoid,
+    normals,
+    shell,
+)
+from posenet.data.synth.raster import Intrinsics, rasterize, screen_rect
+
+
+def _rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def _shapes(rng: np.random.Generator):
+    centre = np.array([rng.uniform(-300, 300), rng.uniform(-300, 300), rng.uniform(2000, 3000)])
+    R = _rotation(rng)
+    return [
+        ellipsoid(centre, rng.uniform(80, 300, 3), R),
+        capsule(centre - R[:, 0] * 250, centre + R[:, 0] * 250, rng.uniform(40, 120)),
+        box(centre, rng.uniform(80, 300, 3), R),
+    ]
+
+
+def _sdf(p, pts: np.ndarray) -> np.ndarray:
+    """Signed distance-like implicit value (0 on the surface) of points ``(N, 3)``."""
+    if p.kind == ELLIPSOID:
+        local = (pts - p.center) @ p.rotation / p.size
+        return np.linalg.norm(local, axis=1) - 1
+    if p.kind == CAPSULE:
+        ba = p.b - p.a
+        s = np.clip((pts - p.a) @ ba / (ba @ ba), 0, 1)
+        return np.linalg.norm(pts - (p.a + s[:, None] * ba), axis=1) - p.size[0]
+    local = (pts - p.center) @ p.rotation / p.size
+    return np.abs(local).max(axis=1) - 1
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_hits_lie_on_the_surface_and_are_the_first_crossing(seed):
+    rng = np.random.default_rng(seed)
+    for p in _shapes(rng):
+        dx = rng.uniform(-0.25, 0.25, (1, 400))
+        dy = rng.uniform(-0.25, 0.25, (1, 400))
+        t = HIT[p.kind](p, dx, dy)[0]
+        hit = np.isfinite(t)
+        assert hit.any() and (~hit).any(), "rays should both hit and miss"
+        dirs = np.stack([dx[0], dy[0], np.ones(400)], 1)
+        on = dirs[hit] * t[hit, None]
+        scale = 1.0 if p.kind == CAPSULE else 1e-3  # capsule sdf is in mm, the others relative
+        assert np.abs(_sdf(p, on)).max() < (0.5 if p.kind == CAPSULE else 2e-3) / scale * scale
+        # The point slightly before the hit is outside: the hit is the first crossing.
+        before = dirs[hit] * (t[hit, None] - 2.0)
+        assert (_sdf(p, before) > 0).all()
+        # Missed rays never enter the shape (brute-force march).
+        ts = np.linspace(1000, 4500, 700)
+        march = dirs[~hit][:, None, :] * ts[None, :, None]
+        assert (_sdf(p, march.reshape(-1, 3)) > -1e-6).all()
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_normals_match_the_implicit_gradient(seed):
+    rng = np.random.default_rng(seed)
+    for p in _shapes(rng):
+        dx = rng.uniform(-0.2, 0.2, (1, 300))
+        dy = rng.uniform(-0.2, 0.2, (1, 300))
+        t = HIT[p.kind](p, dx, dy)[0]
+        hit = np.isfinite(t)
+        pts = np.stack([dx[0], dy[0], np.ones(300)], 1)[hit] * t[hit, None]
+        n = normals(p, *pts.T).T
+        assert np.allclose(np.linalg.norm(n, axis=1), 1, atol=1e-4)
+        eps = 0.05
+        grad = np.stack([(_sdf(p, pts + e) - _sdf(p, pts - e)) / (2 * eps) for e in np.eye(3) * eps], 1)
+        grad /= np.linalg.norm(grad, axis=1, keepdims=True)
+        agree = (n * grad).sum(1)
+        if p.kind == BOX:  # edges are ambiguous: most points sit on a face
+            assert np.mean(agree > 0.999) > 0.95
+        else:
+            assert agree.min() > 0.999
+        # Normals face the camera (at the origin) on the visible side.
+        assert ((n * pts).sum(1) < 1e-3).all()
+
+
+def test_screen_rect_contains_every_hit_pixel():
+    rng = np.random.default_rng(0)
+    K = Intrinsics(540.0, 540.0, 320.0, 240.0, 640, 480)
+    for p in _shapes(rng):
+        g = rasterize([p], K)
+        u0, u1, v0, v1 = screen_rect(p, K)
+        rows, cols = np.nonzero(g.prim == 0)
+        assert len(rows) > 50
+        assert rows.min() >= v0 and rows.max() < v1 and cols.min() >= u0 and cols.max() < u1
+
+
+def test_zbuffer_keeps_the_nearest_surface_and_shell_fills_the_rest():
+    K = Intrinsics(540.0, 540.0, 320.0, 240.0, 640, 480)
+    room = shell([0, 0, 2000], [3000, 3000, 4000])
+    far = box([0, 0, 3000], [400, 400, 50])
+    near = ellipsoid([0, 0, 2000], [200, 200, 200])
+    g = rasterize([room, far, near], K)
+    assert (g.prim >= 0).all(), "the shell closes the room: every pixel sees a surface"
+    assert g.prim[240, 320] == 2 and abs(g.depth[240, 320] - 1800) < 1
+    assert g.prim[240, 320 + 70] == 1 and abs(g.depth[240, 320 + 70] - 2950) < 1
+    dx, dy = (5 - 320) / 540, (5 - 240) / 540
+    assert g.prim[5, 5] == 0 and g.depth[5, 5] == pytest.approx(
+        min(6000, 3000 / abs(dx), 3000 / abs(dy)), abs=1
+    )
+    # Rendering order does not matter.
+    g2 = rasterize([near, room, far], K)
+    assert np.array_equal(g.depth, g2.depth)
