@@ -254,10 +254,15 @@ def test_missing_image_names_the_file(tiny_mvor_dataset) -> None:
 def test_wrong_image_size_names_the_file(tiny_mvor_dataset) -> None:
     cv2.imwrite(str(tiny_mvor_dataset.root / "day1/cam2/color/000000.png"), np.zeros((240, 320, 3), np.uint8))
     ds = MvorDataset(tiny_mvor_dataset.root, tiny_mvor_dataset.annotations)
-    with pytest.raises(
-        ValueError, match=r"day1/cam2/color/000000\.png is 320x240 pixels, but the annotations say 640x480"
-    ):
+    message = r"day1/cam2/color/000000\.png is 320x240 pixels, but the annotations say 640x480"
+    with pytest.raises(ValueError, match=message):
         ds[0]
+    # Without width/height in the image entries, the calibration's imagesize is the reference.
+    gt = tiny_mvor_dataset.gt
+    for image in gt["multiview_images"][0]["images"]:
+        del image["width"], image["height"]
+    with pytest.raises(ValueError, match=message):
+        MvorDataset(tiny_mvor_dataset.root, gt)[0]
 
 
 def test_8bit_depth_names_the_file(tiny_mvor_dataset) -> None:

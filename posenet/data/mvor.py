@@ -232,23 +232,24 @@ class MvorDataset(torch.utils.data.Dataset):
         return [f["id"] for f in self._frames]
 
     # ----------------------------------------------------------------- reading
-    def _camera(self, cam: int, image: dict) -> Camera:
-        camera = self.cameras[cam]
+    def _full_size(self, cam: int, image: dict) -> tuple[int, int] | None:
+        """(width, height) of a view's files: the image entry's, else the calibration's ``imagesize``."""
         if "width" in image and "height" in image:
-            camera = dataclasses.replace(camera, size=(int(image["width"]), int(image["height"])))
+            return int(image["width"]), int(image["height"])
+        return self.cameras[cam].size
+
+    def _camera(self, cam: int, size: tuple[int, int] | None) -> Camera:
+        camera = dataclasses.replace(self.cameras[cam], size=size)
         if self.subsample == 1:
             return camera
         scaled = camera.scale(1.0 / self.subsample)
-        size = (
-            None
-            if camera.size is None
-            else (camera.size[0] // self.subsample, camera.size[1] // self.subsample)
-        )
-        return dataclasses.replace(scaled, size=size)
+        # Blocks that do not fit are dropped (see images.py), hence the floor.
+        small = None if size is None else (size[0] // self.subsample, size[1] // self.subsample)
+        return dataclasses.replace(scaled, size=small)
 
     def _view(self, cam: int, image: dict, boxes: np.ndarray, ids: np.ndarray, kps: np.ndarray) -> View:
-        camera = self._camera(cam, image)
-        size = (int(image["width"]), int(image["height"])) if "width" in image and "height" in image else None
+        size = self._full_size(cam, image)
+        camera = self._camera(cam, size)
         color = depth = None
         if "color" in self.modalities:
             color = subsample_color(read_color(self.root / image["file_name"], size), self.subsample)
