@@ -132,6 +132,21 @@ def _pose_arrays(pose: dict, index: int) -> tuple[np.ndarray, np.ndarray]:
     return points[:, :3].astype(np.float32), points[:, 3] > 0
 
 
+@dataclasses.dataclass(frozen=True)
+class _Frame:
+    """Everything about one multi-view frame but its pixels (built once, when the dataset is made)."""
+
+    id: str
+    day: int
+    views: list[
+        tuple
+    ]  # per view: (cam index, image entry, boxes (K, 4), person ids (K,), keypoints (K, J, 3))
+    poses: np.ndarray  # (N, J, 3) float32
+    valid: np.ndarray  # (N, J) bool
+    person_ids: np.ndarray  # (N,) int64
+    support: np.ndarray  # (N,) int64
+
+
 def _scale_pixels(uv: np.ndarray, factor: int) -> np.ndarray:
     """The camera rule of ``Camera.scale``: u -> (u + 0.5) / factor - 0.5."""
     return (uv + 0.5) / factor - 0.5
@@ -175,17 +190,17 @@ class MvorDataset(torch.utils.data.Dataset):
 
         self.cameras = Camera.from_mvor(self.annotations["cameras_info"])
         self._frames = self._index(self.annotations)
-        all_days = sorted({f["day"] for f in self._frames})
+        all_days = sorted({f.day for f in self._frames})
         if days is not None:
             days = sorted(set(int(d) for d in days))
             missing = [d for d in days if d not in all_days]
             if missing:
                 raise ValueError(f"days {missing} have no frames; the annotations hold days {all_days}")
-            self._frames = [f for f in self._frames if f["day"] in days]
-        self.days = sorted({f["day"] for f in self._frames})
+            self._frames = [f for f in self._frames if f.day in days]
+        self.days = sorted({f.day for f in self._frames})
 
     # ----------------------------------------------------------------- indexing
-    def _index(self, gt: dict) -> list[dict]:
+    def _index(self, gt: dict) -> list[_Frame]:
         """Everything but the pixels, per frame, in ``multiview_images`` order."""
         boxes_by_image = defaultdict(list)
         for box in gt["annotations"]:
@@ -207,19 +222,20 @@ class MvorDataset(torch.utils.data.Dataset):
             if len({v[0] for v in views}) != len(views):
                 raise ValueError(f"multi-view frame {mv['id']!r} lists the same camera twice")
             poses = poses_by_frame.get(mv["id"], [])
-            joints = [_pose_arrays(p, i) for i, p, _ in poses]
+            joints = np.zeros((len(poses), NUM_JOINTS, 3), np.float32)
+            valid = np.zeros((len(poses), NUM_JOINTS), bool)
+            for k, (i, pose, _) in enumerate(poses):
+                joints[k], valid[k] = _pose_arrays(pose, i)
             frames.append(
-                {
-                    "id": mv["id"],
-                    "day": image_day(mv["images"][0]),
-                    "views": views,
-                    "poses": np.stack([j for j, _ in joints])
-                    if joints
-                    else np.zeros((0, NUM_JOINTS, 3), np.float32),
-                    "valid": np.stack([v for _, v in joints]) if joints else np.zeros((0, NUM_JOINTS), bool),
-                    "person_ids": np.array([p["person_id"] for _, p, _ in poses], np.int64),
-                    "support": np.array([s for _, _, s in poses], np.int64),
-                }
+                _Frame(
+                    id=mv["id"],
+                    day=image_day(mv["images"][0]),
+                    views=views,
+                    poses=joints,
+                    valid=valid,
+                    person_ids=np.array([p["person_id"] for _, p, _ in poses], np.int64),
+                    support=np.array([s for _, _, s in poses], np.int64),
+                )
             )
         return frames
 
@@ -229,7 +245,7 @@ class MvorDataset(torch.utils.data.Dataset):
     @property
     def ids(self) -> list[str]:
         """The multi-view ids of the kept frames, in dataset order."""
-        return [f["id"] for f in self._frames]
+        return [f.id for f in self._frames]
 
     # ----------------------------------------------------------------- reading
     def _full_size(self, cam: int, image: dict) -> tuple[int, int] | None:
@@ -277,11 +293,11 @@ class MvorDataset(torch.utils.data.Dataset):
     def __getitem__(self, index: int) -> Sample:
         frame = self._frames[index]
         return Sample(
-            id=frame["id"],
-            day=frame["day"],
-            views=[self._view(*v) for v in frame["views"]],
-            poses=frame["poses"].copy(),
-            valid=frame["valid"].copy(),
-            person_ids=frame["person_ids"].copy(),
-            support=frame["support"].copy(),
+            id=frame.id,
+            day=frame.day,
+            views=[self._view(*v) for v in frame.views],
+            poses=frame.poses.copy(),
+            valid=frame.valid.copy(),
+            person_ids=frame.person_ids.copy(),
+            support=frame.support.copy(),
         )
