@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 
-from posenet.data.mvor import check_annotations, image_day, load_annotations
+from posenet.data.mvor import check_annotations, image_day, load_annotations, pose_joints
 from posenet.data.support import pose_support
 from posenet.skeleton import JOINT_TYPES, NUM_JOINTS, SUPPORT_TYPES
 
@@ -120,13 +120,13 @@ def evaluate(
 
     gt_joints, gt_valid, gt_support, pred_joints, has_pred = [], [], [], [], []
     used = defaultdict(int)
-    for pose, s in zip(gt["annotations3D"], support, strict=True):
+    for i, (pose, s) in enumerate(zip(gt["annotations3D"], support, strict=True)):
         if not in_scope(pose["image_ids"]):
             continue
         key = (str(pose["image_ids"]), int(pose["person_id"]))
-        points = np.asarray(pose["keypoints3D"], np.float64).reshape(-1, 4)[:NUM_JOINTS]  # (J, 4)
-        gt_joints.append(points[:, :3])
-        gt_valid.append(points[:, 3] > 0)
+        joints, valid = pose_joints(pose, i)
+        gt_joints.append(joints)
+        gt_valid.append(valid)
         gt_support.append(s)
         k = used[key]
         used[key] += 1

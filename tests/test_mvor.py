@@ -36,6 +36,8 @@ def test_real_mvor_known_counts(mvor: MvorDataset) -> None:
     assert sum(len(v.boxes) for s in samples for v in s.views) == 4699
     assert all(len(s.views) == 3 and [v.cam_index for v in s.views] == [0, 1, 2] for s in samples)
     assert all(s.valid.all() for s in samples)  # every real 3D joint is annotated
+    assert sum(len(s.poses) == 0 for s in samples) == 103  # frames with boxes only
+    assert all(s.poses.shape == (len(s.person_ids), 10, 3) == (*s.valid.shape, 3) for s in samples)
 
 
 def test_real_support_rule_differs_from_view_counting_only_on_one_frame(mvor_annotations: dict) -> None:

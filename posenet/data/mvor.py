@@ -120,8 +120,8 @@ def _box_arrays(boxes: list[dict], image_name: str) -> tuple[np.ndarray, np.ndar
     return xyxy.astype(np.float32), ids, kps
 
 
-def _pose_arrays(pose: dict, index: int) -> tuple[np.ndarray, np.ndarray]:
-    """(J, 3) float32 joints and (J,) bool validity of one ``annotations3D`` entry."""
+def pose_joints(pose: dict, index: int) -> tuple[np.ndarray, np.ndarray]:
+    """(J, 3) float64 joints (mm) and (J,) bool validity (flag > 0) of one ``annotations3D`` entry."""
     flat = np.asarray(pose["keypoints3D"], np.float64)
     if flat.size % 4 or flat.size < NUM_JOINTS * 4:
         raise ValueError(
@@ -129,7 +129,7 @@ def _pose_arrays(pose: dict, index: int) -> tuple[np.ndarray, np.ndarray]:
             f"expected (x, y, z, flag) for at least {NUM_JOINTS} points"
         )
     points = flat.reshape(-1, 4)[:NUM_JOINTS]  # (J, 4)
-    return points[:, :3].astype(np.float32), points[:, 3] > 0
+    return points[:, :3], points[:, 3] > 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -225,7 +225,7 @@ class MvorDataset(torch.utils.data.Dataset):
             joints = np.zeros((len(poses), NUM_JOINTS, 3), np.float32)
             valid = np.zeros((len(poses), NUM_JOINTS), bool)
             for k, (i, pose, _) in enumerate(poses):
-                joints[k], valid[k] = _pose_arrays(pose, i)
+                joints[k], valid[k] = pose_joints(pose, i)
             frames.append(
                 _Frame(
                     id=mv["id"],
