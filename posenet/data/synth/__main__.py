@@ -59,6 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="MVOR json used by --rig mvor (default: $MVOR_ANNOTATIONS or ../shared/mvor/)",
     )
     p.add_argument("--limit", type=int, default=None, help="twin: render only the first N MVOR frames")
+    p.add_argument("--stride", type=int, default=1, help="twin: render every K-th MVOR frame (quick checks)")
     p.add_argument(
         "--seed", type=int, default=0, help="same seed, same bytes (per-frame seeds from seed/day/frame)"
     )
@@ -79,6 +80,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
             workers=args.workers,
             mvor_annotations=args.from_mvor,
             limit=args.limit,
+            stride=args.stride,
         )
     return SynthConfig(
         out=args.out,

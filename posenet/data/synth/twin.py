@@ -68,6 +68,9 @@ class TwinContext:
     tables: dict[int, tuple[np.ndarray, float]]  # day -> (top centre (3,), yaw)
     frames: list[TwinFrameInfo] = field(default_factory=list)
     table_iou: dict[int, float] = field(default_factory=dict)  # day -> fitted mean IoU to patient boxes
+    rooms: dict[int, tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict
+    )  # day -> (centre xy, half size)
 
 
 def _xyxy(b) -> np.ndarray:
@@ -127,7 +130,22 @@ def load_twin(ann: dict) -> TwinContext:
     for day in sorted({f.day for f in frames}):
         obs = [(v, b) for f in frames if f.day == day for v, b in enumerate(f.patient_boxes) if b is not None]
         ctx.tables[day], ctx.table_iou[day] = fit_table(rig, obs, np.random.default_rng(day))
+        ctx.rooms[day] = room_bounds(ctx, day)
     return ctx
+
+
+def room_bounds(ctx: TwinContext, day: int, margin: float = 700.0) -> tuple[np.ndarray, np.ndarray]:
+    """Floor centre (2,) and half sizes (3,) of a room holding the cameras, the table and all people of a day.
+
+    The cameras hang on the walls and ceiling; people must stand inside, with ``margin`` mm to spare.
+    """
+    T = ctx.cam0_to_world
+    pts = [ctx.rig.cam_to_world[:, :3, 3], ctx.tables[day][0][None]]
+    pts += [kp[:, :3] @ T[:3, :3].T + T[:3, 3] for f in ctx.frames if f.day == day for _, kp, _ in f.poses]
+    pts = np.concatenate(pts)
+    lo, hi = pts[:, :2].min(0) - margin, pts[:, :2].max(0) + margin
+    cams = ctx.rig.cam_to_world[:, :3, 3]
+    return (lo + hi) / 2, np.array([*((hi - lo) / 2), cams[:, 2].max() / 2 + 150])
 
 
 def _cuboid_corners(centre: np.ndarray, yaw: np.ndarray, top: np.ndarray) -> np.ndarray:
@@ -320,12 +338,8 @@ def twin_frame(
             Person(complete_legs(pts12), sample_outfit(rng), pid, role if role == "patient" else "clinician")
         )
     centre, yaw = ctx.tables[info.day]
-    # The cameras hang on the walls and ceiling: the room is the smallest box around them, plus a margin.
-    cams = ctx.rig.cam_to_world[:, :3, 3]
-    room_xy = (cams[:, :2].min(0) + cams[:, :2].max(0)) / 2
-    half = np.array(
-        [*(np.abs(cams[:, :2] - room_xy).max(0) + rng.uniform(250, 600, 2)), cams[:, 2].max() / 2 + 150]
-    )
+    room_xy, half = ctx.rooms[info.day]
+    half = half + [*rng.uniform(0, 500, 2), 0]
     room = Room(table_center=centre, table_yaw=yaw, table_size=(2000.0, 560.0), half_extent=half)
     room.primitives += room_shell(rng, room_xy, half)
     room.primitives += table(centre, yaw, room.table_size)

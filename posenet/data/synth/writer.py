@@ -74,6 +74,7 @@ class SynthConfig:
     workers: int = 1
     mvor_annotations: str | None = None  # MVOR json (twin mode, or the MVOR rig)
     limit: int | None = None  # twin: render only the first N MVOR frames (tests, benchmarks)
+    stride: int = 1  # twin: render every stride-th MVOR frame (quick fidelity checks)
     png_compression: int = 1  # cv2 PNG level: 1 is fast, the files barely shrink at higher levels
     version: str = VERSION
 
@@ -303,8 +304,8 @@ def render_job(job: Job) -> JobResult:
 
 def plan_jobs(cfg: SynthConfig, twin: TwinContext | None) -> list[Job]:
     if cfg.mode == "twin":
-        frames = twin.frames if cfg.limit is None else twin.frames[: cfg.limit]
-        return [Job(i, f.day, f.frame) for i, f in enumerate(frames)]
+        jobs = [Job(i, f.day, f.frame) for i, f in enumerate(twin.frames)][:: max(cfg.stride, 1)]
+        return jobs if cfg.limit is None else jobs[: cfg.limit]
     if cfg.scenes < 1 or cfg.days < 1:
         raise ValueError(f"need scenes >= 1 and days >= 1, got scenes={cfg.scenes}, days={cfg.days}")
     per_day = np.array_split(np.arange(cfg.scenes), cfg.days)

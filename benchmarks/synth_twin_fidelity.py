@@ -1,0 +1,119 @@
+"""How faithful is the MVOR twin? Compares a rendered twin with the real MVOR annotations.
+
+    MVOR=../shared/mvor/camma_mvor_2018.json
+    python -m posenet.data.synth --out /tmp/mvor_twin --from-mvor $MVOR --workers 2
+    python benchmarks/synth_twin_fidelity.py --twin /tmp/mvor_twin --mvor $MVOR
+
+Reports, for the people with a 3D pose:
+  - the IoU between each rendered box and MVOR's real box of the same person in the same image (mean per
+    camera and overall; a box present in only one of the two is listed separately);
+  - the support histogram (number of views with a box per 3D pose) of the twin next to MVOR's
+    (132 / 426 / 503);
+  - the fraction of visible joints (2D flag 2) whose projection lies inside their person's rendered box;
+  - how the hidden people were hidden (from the twin's ``synth_config.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+
+def _boxes(ann: dict) -> dict[tuple[int, int], np.ndarray]:
+    """(image id, person id) -> xyxy for boxes of people with an id."""
+    return {
+        (a["image_id"], a["person_id"]): np.array(
+            [a["bbox"][0], a["bbox"][1], a["bbox"][0] + a["bbox"][2], a["bbox"][1] + a["bbox"][3]]
+        )
+        for a in ann["annotations"]
+        if a["person_id"] >= 0
+    }
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    iw = max(min(a[2], b[2]) - max(a[0], b[0]), 0)
+    ih = max(min(a[3], b[3]) - max(a[1], b[1]), 0)
+    inter = iw * ih
+    return float(inter / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter))
+
+
+def support_histogram(ann: dict) -> Counter:
+    """Views with a box per 3D pose, as the reader counts it."""
+    boxes = _boxes(ann)
+    hist = Counter()
+    for p in ann["annotations3D"]:
+        ids = [int(i) for i in p["image_ids"].split("_")]
+        hist[sum((i, p["person_id"]) in boxes for i in ids)] += 1
+    return hist
+
+
+def fidelity(twin: dict, real: dict) -> dict:
+    """All the figures above, as a dict."""
+    tb, rb = _boxes(twin), _boxes(real)
+    cam_of = {im["id"]: im["cam_id"] for im in real["images"]}
+    posed = {(int(i), p["person_id"]) for p in real["annotations3D"] for i in p["image_ids"].split("_")}
+    rendered_images = {im["id"] for im in twin["images"]}
+    per_cam: dict[int, list[float]] = {}
+    only_real = only_twin = 0
+    for key in posed:
+        if key[0] not in rendered_images:
+            continue
+        if key in tb and key in rb:
+            per_cam.setdefault(cam_of[key[0]], []).append(_iou(tb[key], rb[key]))
+        elif key in rb:
+            only_real += 1
+        elif key in tb:
+            only_twin += 1
+    inside = total = 0
+    for a in twin["annotations"]:
+        if a["person_id"] < 0:
+            continue
+        kp = np.array(a["keypoints"]).reshape(-1, 3)
+        vis = kp[:, 2] == 2
+        x, y, w, h = a["bbox"]
+        ok = (
+            (kp[vis, 0] >= x - 0.5)
+            & (kp[vis, 0] <= x + w - 0.5)
+            & (kp[vis, 1] >= y - 0.5)
+            & (kp[vis, 1] <= y + h - 0.5)
+        )
+        inside += int(ok.sum())
+        total += int(vis.sum())
+    mv_ids = {mv["id"] for mv in twin["multiview_images"]}
+    real_sub = dict(real, annotations3D=[p for p in real["annotations3D"] if p["image_ids"] in mv_ids])
+    all_iou = [v for vals in per_cam.values() for v in vals]
+    return {
+        "frames": len(twin["multiview_images"]),
+        "iou_mean": round(float(np.mean(all_iou)), 3) if all_iou else None,
+        "iou_median": round(float(np.median(all_iou)), 3) if all_iou else None,
+        "iou_per_camera": {f"cam{c}": round(float(np.mean(v)), 3) for c, v in sorted(per_cam.items())},
+        "matched_boxes": len(all_iou),
+        "box_only_in_mvor": only_real,
+        "box_only_in_twin": only_twin,
+        "support_twin": dict(sorted(support_histogram(twin).items())),
+        "support_mvor": dict(sorted(support_histogram(real_sub).items())),
+        "visible_joints_in_box": round(inside / max(total, 1), 4),
+    }
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--twin", required=True, help="folder written by python -m posenet.data.synth --from-mvor")
+    default = Path(__file__).resolve().parents[1] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
+    p.add_argument("--mvor", default=str(default), help="the real MVOR annotation file")
+    args = p.parse_args()
+    twin = json.loads((Path(args.twin) / "annotations.json").read_text())
+    real = json.loads(Path(args.mvor).read_text())
+    out = fidelity(twin, real)
+    cfg = Path(args.twin) / "synth_config.json"
+    if cfg.is_file():
+        out["render_summary"] = json.loads(cfg.read_text())["summary"]
+    print(json.dumps(out, indent=2))
+
+
+if __name__ == "__main__":
+    main()
