@@ -99,11 +99,16 @@ def aggregate(logits: Tensor, points: Tensor, valid: Tensor, eps: float = EPS_LO
     z = z.permute(0, 2, 1, 3).reshape(P, J, V * M)  # (P, J, V*M): one cloud per joint over all views
     weights = torch.softmax(z, dim=-1)
     flat = points.reshape(P, V * M, 3)  # (P, V*M, 3)
-    joints = weights @ flat  # (P, J, 3)
-    # E_a ||p - p_hat||^2 = E_a ||p||^2 - ||p_hat||^2 would cancel catastrophically at room scale (metres),
-    # so the spread is computed from the centred points.
-    sq = ((flat.unsqueeze(1) - joints.unsqueeze(2)) ** 2).sum(-1)  # (P, J, V*M)
-    confidence = ((weights * sq).sum(-1) + 1e-6).sqrt()
+    # Centre the cloud on a fixed point near the person first: the spread E||p - p_hat||^2 =
+    # E||q||^2 - ||q_hat||^2 (q = p - c) then involves metre-sized numbers, not room-sized ones, so float32
+    # keeps ~0.1 mm^2; and no (P, J, V*M, 3) difference tensor is built (a few matrix products).
+    w_valid = valid.reshape(P, V * M, 1).to(dtype)
+    centre = ((flat * w_valid).sum(1) / w_valid.sum(1).clamp_min(1)).detach()  # (P, 3)
+    q = flat - centre.unsqueeze(1)  # (P, V*M, 3)
+    q_hat = weights @ q  # (P, J, 3)
+    joints = q_hat + centre.unsqueeze(1)
+    second = weights @ (q * q).sum(-1, keepdim=True)  # (P, J, 1): E_a ||q||^2
+    confidence = ((second.squeeze(-1) - (q_hat * q_hat).sum(-1)).clamp_min(0) + 1e-6).sqrt()
     return JointEstimate(joints, confidence, valid.reshape(P, V * M).any(-1))
 
 
