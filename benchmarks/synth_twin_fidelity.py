@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from posenet.data.support import pose_support
+
 
 def _boxes(ann: dict) -> dict[tuple[int, int], np.ndarray]:
     """(image id, person id) -> xyxy for boxes of people with an id."""
@@ -42,13 +44,8 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def support_histogram(ann: dict) -> Counter:
-    """Views with a box per 3D pose, as the reader counts it."""
-    boxes = _boxes(ann)
-    hist = Counter()
-    for p in ann["annotations3D"]:
-        ids = [int(i) for i in p["image_ids"].split("_")]
-        hist[sum((i, p["person_id"]) in boxes for i in ids)] += 1
-    return hist
+    """Supporting views per 3D pose, counted by the project's own rule (``posenet.data.support``)."""
+    return Counter(pose_support(ann))
 
 
 def fidelity(twin: dict, real: dict) -> dict:
@@ -84,7 +81,11 @@ def fidelity(twin: dict, real: dict) -> dict:
         inside += int(ok.sum())
         total += int(vis.sum())
     mv_ids = {mv["id"] for mv in twin["multiview_images"]}
-    real_sub = dict(real, annotations3D=[p for p in real["annotations3D"] if p["image_ids"] in mv_ids])
+    real_sub = dict(
+        real,
+        annotations3D=[p for p in real["annotations3D"] if p["image_ids"] in mv_ids],
+        multiview_images=[mv for mv in real["multiview_images"] if mv["id"] in mv_ids],
+    )
     all_iou = [v for vals in per_cam.values() for v in vals]
     return {
         "frames": len(twin["multiview_images"]),

@@ -48,7 +48,8 @@ class TwinFrameInfo:
         day, frame: recording day and frame number (from the file names).
         image_ids: per camera index, MVOR's image id.
         poses: (person_id, (12, 4) keypoints3D with flags, role) per annotated 3D pose (camera-0 frame, mm).
-        boxes: (cam index, person_id) -> xyxy MVOR box for people with an id.
+        boxes: (cam index, person_id) -> xyxy MVOR boxes of people with an id (a list: MVOR reuses an id
+            for two people in a few frames).
         patient_boxes: per camera index, the patient's xyxy box (or None).
     """
 
@@ -56,7 +57,7 @@ class TwinFrameInfo:
     frame: int
     image_ids: list[int]
     poses: list[tuple[int, np.ndarray, str]]
-    boxes: dict[tuple[int, int], np.ndarray]
+    boxes: dict[tuple[int, int], list[np.ndarray]]
     patient_boxes: list[np.ndarray | None]
 
 
@@ -113,7 +114,7 @@ def load_twin(ann: dict) -> TwinContext:
             image_ids[v] = im["id"]
             for a in by_image.get(im["id"], []):
                 if a["person_id"] >= 0:
-                    boxes[(v, a["person_id"])] = _xyxy(a["bbox"])
+                    boxes.setdefault((v, a["person_id"]), []).append(_xyxy(a["bbox"]))
                     roles[a["person_id"]] = a["person_role"]
                 elif a["person_role"] == "patient":
                     patient[v] = _xyxy(a["bbox"])
@@ -326,6 +327,28 @@ def _overlap(a: np.ndarray, b: np.ndarray) -> float:
 # ------------------------------------------------------------------ frames
 
 
+def assign_boxes(rig: Rig, persons: list[Person], boxes: dict[tuple[int, int], list[np.ndarray]]) -> set:
+    """(view, person index) pairs that MVOR shows: each real box goes to one person with its id.
+
+    Normally a person id has at most one box per view. Where MVOR gives two people the same id, each box goes
+    to the person whose projected joints fit it best (IoU), so that nobody is shown twice for one box.
+    """
+    show = set()
+    for (v, pid), real in boxes.items():
+        cands = [i for i, p in enumerate(persons) if p.person_id == pid]
+        if len(cands) <= len(real):
+            show |= {(v, i) for i in cands}
+            continue
+        pts = np.stack([persons[i].points[:12] for i in cands])  # (C, 12, 3)
+        proj = _project_boxes(rig, pts)[v]  # (C, 4)
+        iou = box_iou(proj[:, None, :], np.stack(real)[None])  # (C, boxes)
+        for _ in range(len(real)):  # greedy: best remaining (person, box) pair
+            c, b = np.unravel_index(np.argmax(iou), iou.shape)
+            show.add((v, cands[c]))
+            iou[c, :], iou[:, b] = -1, -1
+    return show
+
+
 def twin_frame(
     ctx: TwinContext, info: TwinFrameInfo, rng: np.random.Generator
 ) -> tuple[Frame, dict[str, int]]:
@@ -357,11 +380,9 @@ def twin_frame(
         persons.append(Person(pts, sample_outfit(rng, "patient"), -1, "patient", hump))
         room.primitives += sheet
     frame = Frame(persons, room.primitives, sample_lighting(rng))
-    must_hide, must_show = set(), set()
-    for i, person in enumerate(persons):
-        if person.person_id < 0:
-            continue
-        for v in range(ctx.rig.num_views):
-            (must_show if (v, person.person_id) in info.boxes else must_hide).add((v, i))
+    must_show = assign_boxes(ctx.rig, persons, info.boxes)
+    must_hide = {
+        (v, i) for i, p in enumerate(persons) if p.person_id >= 0 for v in range(ctx.rig.num_views)
+    } - must_show
     stats = add_occluders(frame, ctx.rig, must_hide, must_show, ceiling)
     return frame, stats

@@ -282,8 +282,8 @@ def render_job(job: Job) -> JobResult:
     mv_id = "_".join(str(im["id"]) for im in images)
     poses = []
     for i, person in enumerate(frame.persons):
-        if person.person_id < 0 or support[i] == 0:
-            continue
+        if person.person_id < 0 or (support[i] == 0 and cfg.mode != "twin"):
+            continue  # the twin keeps every real pose, even one its own boxes miss (MVOR reuses ids)
         if cfg.mode == "twin":
             kp3 = next(kp for pid, kp, _ in twin.frames[job.index].poses if pid == person.person_id)
             flat = kp3.ravel().tolist()  # the real annotation, unchanged

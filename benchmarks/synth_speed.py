@@ -1,0 +1,104 @@
+"""Seconds per frame and per view of the synthetic renderer, by stage, on one core.
+
+    python benchmarks/synth_speed.py --frames 12
+    python benchmarks/synth_speed.py --frames 12 --mvor ../shared/mvor/camma_mvor_2018.json  # twin frames too
+
+Stages: building the frame (poses, room; for the twin also the occluder placement), ray casting (z-buffer,
+ids, normals), the sensor models (depth and colour), and PNG encoding (in memory, so the disk does not count).
+Both wall-clock and CPU seconds are printed: on a shared machine the CPU time is the steadier figure. The last
+line extrapolates to the 732-frame MVOR twin with 2 worker processes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from posenet.data.synth.procedural import procedural_frame
+from posenet.data.synth.raster import rasterize
+from posenet.data.synth.rig import random_rig
+from posenet.data.synth.scene import frame_primitives, render_frame
+from posenet.data.synth.twin import load_twin, twin_frame
+
+PNG = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
+       cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB]  # fmt: skip
+
+
+class Clock:
+    """Accumulates wall and CPU seconds per stage."""
+
+    def __init__(self) -> None:
+        self.wall: dict[str, float] = {}
+        self.cpu: dict[str, float] = {}
+
+    def time(self, stage: str, fn, *args):
+        w, c = time.perf_counter(), time.process_time()
+        out = fn(*args)
+        self.wall[stage] = self.wall.get(stage, 0.0) + time.perf_counter() - w
+        self.cpu[stage] = self.cpu.get(stage, 0.0) + time.process_time() - c
+        return out
+
+
+def run(builder, rig, n: int, seed: int) -> dict:
+    clock = Clock()
+    views = 0
+    for k in range(n):
+        rng = np.random.default_rng([seed, k])
+        frame = clock.time("build", builder, rng)
+        renders = clock.time("render (raster + sensor)", render_frame, frame, rig, rng)
+        # Ray casting alone, to split the render time into geometry and sensor.
+        prims = frame_primitives(frame)
+        T = rig.world_to_cam()
+        for v in range(rig.num_views):
+            cam = [p.to_camera(T[v]) for p in prims]
+            clock.time("raster only", rasterize, cam, rig.intrinsics[v])
+        for r in renders:
+            clock.time(
+                "png encode",
+                lambda r=r: (cv2.imencode(".png", r.color, PNG), cv2.imencode(".png", r.depth, PNG)),
+            )
+        views += len(renders)
+    total_wall = sum(v for k, v in clock.wall.items() if k != "raster only")
+    total_cpu = sum(v for k, v in clock.cpu.items() if k != "raster only")
+    return {
+        "frames": n,
+        "views": views,
+        "seconds_per_frame_wall": round(total_wall / n, 3),
+        "seconds_per_frame_cpu": round(total_cpu / n, 3),
+        "seconds_per_view_cpu": round(total_cpu / views, 3),
+        "cpu_seconds_per_frame_by_stage": {k: round(v / n, 3) for k, v in clock.cpu.items()},
+    }
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--frames", type=int, default=12, help="frames per kind")
+    p.add_argument("--mvor", default=None, help="MVOR json: also time twin frames (every 60th MVOR frame)")
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args()
+    cv2.setNumThreads(1)
+    rng = np.random.default_rng(args.seed)
+    rig = random_rig(rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), 3)
+    enclose = rig.cam_to_world[:, :3, 3]
+    out = {
+        "procedural (3 views)": run(
+            lambda r: procedural_frame(r, enclose=enclose), rig, args.frames, args.seed
+        )
+    }
+    if args.mvor:
+        ctx = load_twin(json.loads(Path(args.mvor).read_text()))
+        infos = ctx.frames[:: max(len(ctx.frames) // args.frames, 1)][: args.frames]
+        it = iter(infos)
+        out["twin (3 views)"] = run(lambda r: twin_frame(ctx, next(it), r)[0], ctx.rig, len(infos), args.seed)
+        per = out["twin (3 views)"]["seconds_per_frame_cpu"]
+        out["twin_732_frames_2_workers_minutes"] = round(732 * per / 2 / 60, 1)
+    print(json.dumps(out, indent=2))
+
+
+if __name__ == "__main__":
+    main()
