@@ -184,11 +184,25 @@ def _grid(height: int, width: int, device, dtype) -> Tensor:
     return torch.stack([u, v], -1).reshape(1, height * width, 2)  # (1, H*W, 2)
 
 
+def affine_inverse(A: Tensor) -> Tensor:
+    """Exact inverse of affine maps ``A (N, 3, 3)`` (last row 0, 0, 1), in closed form: torch.linalg.inv's
+    batched LU costs more than the whole lifting for these 3x3s on CPU."""
+    a, b, c, d = A[:, 0, 0], A[:, 0, 1], A[:, 1, 0], A[:, 1, 1]
+    det = a * d - b * c
+    L = torch.stack([torch.stack([d, -b], -1), torch.stack([-c, a], -1)], -2) / det.view(
+        -1, 1, 1
+    )  # (N, 2, 2)
+    t = -(L @ A[:, :2, 2:])  # (N, 2, 1)
+    bottom = torch.zeros_like(A[:, 2:, :])
+    bottom[:, 0, 2] = 1
+    return torch.cat([torch.cat([L, t], -1), bottom], -2)
+
+
 def network_pixels_in_original(A: Tensor, out_size: tuple[int, int]) -> Tensor:
     """``(N, h*w, 2)`` original pixel coordinates of every network pixel (row-major): ``A^-1 (u', v')``."""
     w, h = out_size
     grid = _grid(h, w, A.device, A.dtype).expand(A.shape[0], h * w, 2)
-    return _apply(torch.linalg.inv(A), grid)
+    return _apply(affine_inverse(A), grid)
 
 
 def _normalise(uv: Tensor, size: tuple[int, int]) -> Tensor:

@@ -366,7 +366,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m posenet.train",
         description=__doc__.split("\n\n")[0]
-        + ". Options left out take the preset's value (see --preset); the resolved config is saved in the "
+        + " Options left out take the preset's value (see --preset); the resolved config is saved in the "
         "run "
         "folder and beside every checkpoint.",
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -420,7 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--decay-start", type=float, help="fraction of training after which the LR decays to 0 (cosine)"
     )
     g.add_argument("--val-every", type=int, help="epochs between validations on the held-out day")
-    g.add_argument("--seed", type=int)
+    g.add_argument("--seed", type=int, help="seed of the initialisation, shuffling and augmentation")
     g = p.add_argument_group("augmentation (each switchable)")
     g.add_argument("--flip", action=argparse.BooleanOptionalAction, help="horizontal flip, p = 0.5")
     g.add_argument(

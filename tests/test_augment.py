@@ -112,3 +112,10 @@ def test_crop_points_carry_original_pixels_and_depth():
     assert (scene.depth.reshape(-1)[~inside] == 0).all()
     assert not scene.valid.reshape(-1)[scene.depth.reshape(-1) == 0].any()
     assert scene.images.shape == (2, cfg.in_channels, 32, 32)
+
+
+def test_affine_inverse_matches_linalg():
+    g = torch.Generator().manual_seed(5)
+    J, _ = aug.random_jitter(6, aug.AugmentConfig(), (48, 32), person_crop=True, generator=g)
+    A = J @ aug.box_crop_affine(torch.rand(6, 4, generator=g).sort(-1).values * 100, 48)
+    torch.testing.assert_close(aug.affine_inverse(A), torch.linalg.inv(A), atol=1e-4, rtol=1e-4)
