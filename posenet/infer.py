@@ -24,7 +24,7 @@ import torch
 from posenet.cameras import Camera
 from posenet.checkpoint import load_checkpoint
 from posenet.inputs import build_scene
-from posenet.model import PoseNet
+from posenet.model import PoseNet, predict_scenes
 
 Tensor = torch.Tensor
 
@@ -99,9 +99,16 @@ class PoseEstimator:
         if boxes.shape[0] == 0:
             z = torch.zeros(0, J)
             return PosePrediction(torch.zeros(0, J, 3), z, torch.zeros(0, dtype=torch.bool))
-        scene = build_scene(list(views), boxes, has_box, self.model.config.inputs)
+        views = list(views)
+        scenes = {}
+
+        def build(_: int, mirror: bool):
+            scenes[mirror] = build_scene(views, boxes, has_box, self.model.config.inputs, mirror=mirror)
+            return scenes[mirror]
+
         with torch.inference_mode():
-            out = self.model(scene)
+            out = predict_scenes(self.model, build, 1)[0]  # with flip averaging if the config asks for it
+        scene = scenes[False]
         pred = PosePrediction(
             out.joints.cpu(),
             out.confidence.cpu(),

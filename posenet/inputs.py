@@ -168,6 +168,7 @@ def build_scene(
     config: InputConfig,
     augment: aug.AugmentConfig | None = None,
     generator: torch.Generator | None = None,
+    mirror: bool = False,
 ) -> SceneInput:
     """The network inputs and lifting points of one scene.
 
@@ -177,6 +178,7 @@ def build_scene(
         has_box: (P, V) bool.
         config: the input configuration.
         augment: None at test time; else the random augmentation to draw (per person and view).
+        mirror: flip every network image horizontally (test-time flip averaging; undone like any flip).
     """
     if not views:
         raise ValueError("a scene needs at least one view")
@@ -216,6 +218,9 @@ def build_scene(
     if training:
         J, flipped = aug.random_jitter(P * V, augment, size, config.mode == "crop", generator)
         A = J @ A
+    if mirror:
+        flipped = ~flipped
+        A = aug.hflip(torch.ones(P * V, dtype=torch.bool), size[0]) @ A
 
     # ---- network input
     src = aug.network_pixels_in_original(A, size)  # (P*V, h*w, 2)

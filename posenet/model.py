@@ -31,9 +31,8 @@ class ModelConfig:
     aggregation: str = "3d"  # "3d": the paper's method; "2d": its 2D-loss baseline
     eps: float = lifting.EPS_LOGIT  # the logit given to points outside the box or without depth
     channels_last: bool = True  # measured faster on CPU (benchmarks/posenet_speed.py)
-    bf16: bool = (
-        True  # bf16 autocast for the U-Net on CPU (measured ~2-4x faster here); lifting stays float32
-    )
+    bf16: bool = True  # bf16 autocast for the U-Net on CPU (faster here); lifting stays float32
+    flip_test: bool = False  # inference: also run the mirrored inputs and average (2x the U-Net work)
 
     def __post_init__(self) -> None:
         if isinstance(self.inputs, dict):
@@ -125,3 +124,27 @@ class PoseNet(nn.Module):
         points = lifting.lift(scene.cameras, uv, depth)  # (P or 1, V, M, 3)
         est = lifting.aggregate(logits, points, valid, self.config.eps)
         return PoseOutput(est.joints, est.confidence, est.has_points, logits)
+
+
+def average_flips(plain: PoseOutput, mirrored: PoseOutput) -> PoseOutput:
+    """Test-time flip averaging: the mean of the joints (and confidences) of a scene and of its mirrored copy.
+
+    Both are already in original pixels and un-flipped channels, so they estimate the same joints."""
+    return PoseOutput(
+        (plain.joints + mirrored.joints) / 2,
+        (plain.confidence + mirrored.confidence) / 2,
+        plain.has_points & mirrored.has_points,
+        plain.logits,
+    )
+
+
+def predict_scenes(model: PoseNet, build, count: int) -> list[PoseOutput]:
+    """Inference on ``count`` scenes built by ``build(i, mirror) -> SceneInput``, in one U-Net pass, with the
+    flip averaging of ``model.config.flip_test``."""
+    scenes = [build(i, False) for i in range(count)]
+    if model.config.flip_test:
+        scenes += [build(i, True) for i in range(count)]
+    outs = model(scenes)
+    if model.config.flip_test:
+        return [average_flips(a, b) for a, b in zip(outs[:count], outs[count:], strict=True)]
+    return outs

@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from posenet.checkpoint import load_checkpoint
 from posenet.inputs import build_scene, persons_of_sample
-from posenet.model import PoseNet
+from posenet.model import PoseNet, predict_scenes
 
 
 def predict_samples(
@@ -37,9 +37,13 @@ def predict_samples(
     def flush() -> None:
         if not pending:
             return
-        scenes = [build_scene(p.views, p.boxes, p.has_box, model.config.inputs) for _, p in pending]
+
+        def build(i: int, mirror: bool):
+            p = pending[i][1]
+            return build_scene(p.views, p.boxes, p.has_box, model.config.inputs, mirror=mirror)
+
         with torch.inference_mode():
-            outs = model(scenes)
+            outs = predict_scenes(model, build, len(pending))
         for (sample_id, persons), out in zip(pending, outs, strict=True):
             for k, pid in enumerate(persons.person_ids.tolist()):
                 if not bool(out.has_points[k]):
@@ -89,6 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenes-per-batch", type=int, default=4, help="scenes that share one U-Net forward pass")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda")
+    p.add_argument(
+        "--flip-test",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="average with the horizontally mirrored inputs (2x the work; default: the checkpoint's setting)",
+    )
     return p
 
 
@@ -99,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     model, config = load_checkpoint(args.checkpoint, args.device)
+    if args.flip_test is not None:
+        model.config.flip_test = args.flip_test
     subsample = int(config.get("subsample", 1))
     data = MvorDataset(args.data, args.annotations, subsample=subsample, days=args.days)
     preds = predict_samples(model, data, args.scenes_per_batch)

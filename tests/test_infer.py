@@ -8,7 +8,7 @@ from tiny_scenes import write_dataset
 from posenet.checkpoint import DEFAULT_WEIGHTS, load_checkpoint, save_checkpoint
 from posenet.data.mvor import MvorDataset
 from posenet.infer import PoseEstimator
-from posenet.inputs import InputConfig
+from posenet.inputs import InputConfig, build_scene
 from posenet.model import ModelConfig, PoseNet
 
 
@@ -96,3 +96,16 @@ def test_missing_default_weights_say_how_to_get_them():
         PoseEstimator.from_checkpoint(None)
     with pytest.raises(FileNotFoundError, match="does not exist"):
         PoseEstimator.from_checkpoint("/nonexistent/model.safetensors")
+
+
+def test_flip_averaging_averages_the_mirrored_pass(scene):
+    views, boxes = scene
+    est = _estimator("crop", seed=4)
+    plain = est.predict(views, boxes)
+    est.model.config.flip_test = True
+    both = est.predict(views, boxes)
+    box_t, has = PoseEstimator._boxes(boxes, len(views))
+    with torch.inference_mode():
+        mirrored = est.model(build_scene(views, box_t, has, est.model.config.inputs, mirror=True))
+    assert not torch.allclose(mirrored.joints, plain.joints)
+    torch.testing.assert_close(both.joints, (plain.joints + mirrored.joints) / 2, atol=1e-3, rtol=1e-5)
