@@ -80,6 +80,21 @@ def fidelity(twin: dict, real: dict) -> dict:
         )
         inside += int(ok.sum())
         total += int(vis.sum())
+    # Box-only clinicians (no 3D pose): how many, and how well the twin's bystanders cover MVOR's boxes.
+    posed_ids = {(i, pid) for i, pid in posed}
+    only = {}
+    for name, ann in (("twin", twin), ("mvor", real)):
+        only[name] = {}
+        for a in ann["annotations"]:
+            key = (a["image_id"], a["person_id"])
+            if a["person_role"] == "clinician" and key not in posed_ids and a["image_id"] in rendered_images:
+                x, y, w, h = a["bbox"]
+                only[name].setdefault(a["image_id"], []).append(np.array([x, y, x + w, y + h]))
+    best = [
+        max((_iou(b, t) for t in only["twin"].get(img, [])), default=0.0)
+        for img, boxes in only["mvor"].items()
+        for b in boxes
+    ]
     mv_ids = {mv["id"] for mv in twin["multiview_images"]}
     real_sub = dict(
         real,
@@ -98,6 +113,11 @@ def fidelity(twin: dict, real: dict) -> dict:
         "support_twin": dict(sorted(support_histogram(twin).items())),
         "support_mvor": dict(sorted(support_histogram(real_sub).items())),
         "visible_joints_in_box": round(inside / max(total, 1), 4),
+        "box_only_clinician_boxes": {
+            "twin": sum(map(len, only["twin"].values())),
+            "mvor": sum(map(len, only["mvor"].values())),
+            "mvor_boxes_matched_iou_0.5": round(float(np.mean(np.array(best) >= 0.5)), 3) if best else None,
+        },
     }
 
 

@@ -125,6 +125,33 @@ def unoccluded_pixels(prims_cam: list[Primitive], owner: int, K: Intrinsics, fac
     return int((g.prim >= 0).sum()) * factor * factor
 
 
+def silhouettes(
+    frame: Frame, rig: Rig, factor: int = 4
+) -> dict[tuple[int, int], tuple[np.ndarray, float, int]]:
+    """Per (view, person): unoccluded silhouette box (xyxy, full-res pixels), nearest depth, pixel count."""
+    prims = frame_primitives(frame)
+    T = rig.world_to_cam()
+    out = {}
+    for v, K in enumerate(rig.intrinsics):
+        small = Intrinsics(
+            K.fx / factor,
+            K.fy / factor,
+            (K.cx + 0.5) / factor - 0.5,
+            (K.cy + 0.5) / factor - 0.5,
+            K.width // factor,
+            K.height // factor,
+        )
+        for i in range(len(frame.persons)):
+            g = rasterize([p.to_camera(T[v]) for p in prims if p.owner == i], small)
+            hit = g.prim >= 0
+            if not hit.any():
+                continue
+            rows, cols = np.flatnonzero(hit.any(1)), np.flatnonzero(hit.any(0))
+            b = np.array([cols[0], rows[0], cols[-1] + 1, rows[-1] + 1], float) * factor
+            out[(v, i)] = (b, float(g.depth[hit].min()), int(hit.sum()) * factor * factor)
+    return out
+
+
 def render_view(
     frame: Frame,
     prims: list[Primitive],

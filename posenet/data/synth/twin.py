@@ -25,12 +25,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from posenet.data.synth.body import sample_outfit
+from posenet.data.synth.boxes import box_iou, covered, project_boxes
+from posenet.data.synth.bystanders import add_bystanders
 from posenet.data.synth.poses import lying_pose
 from posenet.data.synth.primitives import OWNER_ROOM, Material, box, capsule
-from posenet.data.synth.raster import Intrinsics, rasterize
 from posenet.data.synth.rig import Rig, mvor_rig
 from posenet.data.synth.room import DARK, Room, ceiling_lamp, patient_drape, room_shell, table, yaw_matrix
-from posenet.data.synth.scene import Frame, Person, frame_primitives
+from posenet.data.synth.scene import Frame, Person, silhouettes
 from posenet.data.synth.sensor import sample_lighting
 from posenet.data.synth.skeleton_full import complete_legs, estimate_floor
 
@@ -51,6 +52,7 @@ class TwinFrameInfo:
         boxes: (cam index, person_id) -> xyxy MVOR boxes of people with an id (a list: MVOR reuses an id
             for two people in a few frames).
         patient_boxes: per camera index, the patient's xyxy box (or None).
+        bystander_boxes: (cam index, xyxy) boxes of clinicians without a 3D pose in this frame.
     """
 
     day: int
@@ -59,6 +61,7 @@ class TwinFrameInfo:
     poses: list[tuple[int, np.ndarray, str]]
     boxes: dict[tuple[int, int], list[np.ndarray]]
     patient_boxes: list[np.ndarray | None]
+    bystander_boxes: list[tuple[int, np.ndarray]] = field(default_factory=list)
 
 
 @dataclass
@@ -126,7 +129,14 @@ def load_twin(ann: dict) -> TwinContext:
             )
             for p in poses_by_mv.get(mv["id"], [])
         ]
-        frames.append(TwinFrameInfo(day, frame_no, image_ids, poses, boxes, patient))
+        posed = {p[0] for p in poses}
+        bystanders = [
+            (img_to_cam[a["image_id"]], _xyxy(a["bbox"]))
+            for im in ims
+            for a in by_image.get(im["id"], [])
+            if a["person_role"] == "clinician" and a["person_id"] not in posed
+        ]
+        frames.append(TwinFrameInfo(day, frame_no, image_ids, poses, boxes, patient, bystanders))
     ctx = TwinContext(rig, floor_z, cam0_to_world, {}, frames)
     for day in sorted({f.day for f in frames}):
         obs = [(v, b) for f in frames if f.day == day for v, b in enumerate(f.patient_boxes) if b is not None]
@@ -162,29 +172,6 @@ def _cuboid_corners(centre: np.ndarray, yaw: np.ndarray, top: np.ndarray) -> np.
     return np.concatenate(out, 1)
 
 
-def _project_boxes(rig: Rig, pts: np.ndarray) -> np.ndarray:
-    """(V, C, 4) image-clipped xyxy boxes of point sets ``pts (C, N, 3)`` (world) in each camera."""
-    T = rig.world_to_cam()
-    out = []
-    for v, K in enumerate(rig.intrinsics):  # a few cameras
-        pc = pts @ T[v, :3, :3].T + T[v, :3, 3]
-        z = np.maximum(pc[..., 2], 50.0)
-        u = K.fx * pc[..., 0] / z + K.cx
-        w = K.fy * pc[..., 1] / z + K.cy
-        b = np.stack([u.min(-1), w.min(-1), u.max(-1), w.max(-1)], -1)
-        out.append(np.clip(b, 0, [K.width - 1, K.height - 1, K.width - 1, K.height - 1]))
-    return np.stack(out)
-
-
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """IoU of xyxy boxes ``a (..., 4)`` and ``b (..., 4)`` (broadcast)."""
-    iw = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0, None)
-    ih = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0, None)
-    inter = iw * ih
-    area = lambda x: (x[..., 2] - x[..., 0]) * (x[..., 3] - x[..., 1])  # noqa: E731
-    return inter / np.maximum(area(a) + area(b) - inter, 1e-9)
-
-
 def fit_table(
     rig: Rig,
     observations: list[tuple[int, np.ndarray]],
@@ -207,7 +194,7 @@ def fit_table(
         cand = best + rng.uniform(-1, 1, (samples, 4)) * spread
         cand[0] = best
         corners = _cuboid_corners(cand[:, :2], cand[:, 2], cand[:, 3])
-        proj = _project_boxes(rig, corners)  # (V, C, 4)
+        proj = project_boxes(rig, corners)  # (V, C, 4)
         iou = box_iou(proj[views], boxes[:, None, :])  # (M, C)
         score = iou.mean(0)
         k = int(score.argmax())
@@ -218,33 +205,6 @@ def fit_table(
 
 
 # ------------------------------------------------------------------ occluders
-
-
-def _silhouettes(
-    frame: Frame, rig: Rig, factor: int = 4
-) -> dict[tuple[int, int], tuple[np.ndarray, float, int]]:
-    """Per (view, person): unoccluded silhouette box (xyxy, full-res pixels), nearest depth, pixel count."""
-    prims = frame_primitives(frame)
-    T = rig.world_to_cam()
-    out = {}
-    for v, K in enumerate(rig.intrinsics):
-        small = Intrinsics(
-            K.fx / factor,
-            K.fy / factor,
-            (K.cx + 0.5) / factor - 0.5,
-            (K.cy + 0.5) / factor - 0.5,
-            K.width // factor,
-            K.height // factor,
-        )
-        for i in range(len(frame.persons)):
-            g = rasterize([p.to_camera(T[v]) for p in prims if p.owner == i], small)
-            hit = g.prim >= 0
-            if not hit.any():
-                continue
-            rows, cols = np.flatnonzero(hit.any(1)), np.flatnonzero(hit.any(0))
-            b = np.array([cols[0], rows[0], cols[-1] + 1, rows[-1] + 1], float) * factor
-            out[(v, i)] = (b, float(g.depth[hit].min()), int(hit.sum()) * factor * factor)
-    return out
 
 
 def _monitor_covering(
@@ -274,7 +234,7 @@ def add_occluders(
     stats = {"occluder": 0, "not_drawn": 0, "out_of_view": 0}
     if not must_hide:
         return stats
-    sil = _silhouettes(frame, rig)
+    sil = silhouettes(frame, rig)
     for v, i in sorted(must_hide):
         if (v, i) not in sil or sil[(v, i)][2] < min_pixels:
             stats["out_of_view"] += 1
@@ -290,7 +250,7 @@ def add_occluders(
             corners = centre + (np.stack([sx.ravel(), sy.ravel(), sz.ravel()], 1) * half) @ R.T  # (8, 3)
             if corners[:, 2].max() > ceiling - 50 or corners[:, 2].min() < 100:
                 continue
-            proj = _project_boxes(rig, corners[None])[:, 0]  # (V, 4)
+            proj = project_boxes(rig, corners[None])[:, 0]  # (V, 4)
             T = rig.world_to_cam()
             cost = 0.0
             for w, q in must_show:  # people who must stay visible: how much would this panel cover them?
@@ -300,7 +260,7 @@ def add_occluders(
                 depth = (corners @ T[w, :3, :3].T + T[w, :3, 3])[:, 2]
                 if depth.min() >= qz or depth.max() <= 0:
                     continue
-                cost += _overlap(proj[w], qb)
+                cost += covered(proj[w], qb)
             if cost < best_cost:
                 best, best_cost = (centre, half, R), cost
         if best is None or best_cost > 0.5:
@@ -315,13 +275,6 @@ def add_occluders(
         )
         stats["occluder"] += 1
     return stats
-
-
-def _overlap(a: np.ndarray, b: np.ndarray) -> float:
-    """Fraction of box ``b``'s area covered by box ``a`` (xyxy)."""
-    iw = max(min(a[2], b[2]) - max(a[0], b[0]), 0)
-    ih = max(min(a[3], b[3]) - max(a[1], b[1]), 0)
-    return float(iw * ih / max((b[2] - b[0]) * (b[3] - b[1]), 1e-9))
 
 
 # ------------------------------------------------------------------ frames
@@ -340,7 +293,7 @@ def assign_boxes(rig: Rig, persons: list[Person], boxes: dict[tuple[int, int], l
             show |= {(v, i) for i in cands}
             continue
         pts = np.stack([persons[i].points[:12] for i in cands])  # (C, 12, 3)
-        proj = _project_boxes(rig, pts)[v]  # (C, 4)
+        proj = project_boxes(rig, pts)[v]  # (C, 4)
         iou = box_iou(proj[:, None, :], np.stack(real)[None])  # (C, boxes)
         for _ in range(len(real)):  # greedy: best remaining (person, box) pair
             c, b = np.unravel_index(np.argmax(iou), iou.shape)
@@ -381,8 +334,9 @@ def twin_frame(
         room.primitives += sheet
     frame = Frame(persons, room.primitives, sample_lighting(rng))
     must_show = assign_boxes(ctx.rig, persons, info.boxes)
+    stats_by = add_bystanders(frame, ctx.rig, info.bystander_boxes, must_show, (room_xy, half), rng)
     must_hide = {
         (v, i) for i, p in enumerate(persons) if p.person_id >= 0 for v in range(ctx.rig.num_views)
     } - must_show
     stats = add_occluders(frame, ctx.rig, must_hide, must_show, ceiling)
-    return frame, stats
+    return frame, dict(stats, **stats_by)

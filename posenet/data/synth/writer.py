@@ -400,7 +400,7 @@ def summarise(results: list[JobResult], wall: float) -> dict:
     support = np.bincount([s for r in results for s in r.stats.get("support", [])], minlength=5)
     hide = {}
     for r in results:
-        for k in ("occluder", "not_drawn", "out_of_view"):
+        for k in ("occluder", "not_drawn", "out_of_view", "bystanders", "bystanders_dropped"):
             if k in r.stats:
                 hide[k] = hide.get(k, 0) + r.stats[k]
     out = {
