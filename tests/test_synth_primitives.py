@@ -120,3 +120,26 @@ def test_zbuffer_keeps_the_nearest_surface_and_shell_fills_the_rest():
     # Rendering order does not matter.
     g2 = rasterize([near, room, far], K)
     assert np.array_equal(g.depth, g2.depth)
+
+
+def test_box_geometry_matches_the_project_camera_model():
+    import torch
+
+    from posenet.cameras import Camera
+    from posenet.data.synth.boxes import box_iou, covered, project_boxes
+    from posenet.data.synth.rig import random_rig
+
+    rng = np.random.default_rng(1)
+    rig = random_rig(rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), 3)
+    pts = rng.uniform([-400, -400, 200], [400, 400, 1700], (2, 12, 3))  # (C, N, 3) world points
+    boxes = project_boxes(rig, pts)  # (V, C, 4)
+    for v, K in enumerate(rig.intrinsics):
+        cam = Camera.create(K.fx, K.fy, K.cx, K.cy, extrinsics=rig.cam_to_world[v])  # world as the reference
+        uv = cam.project(torch.as_tensor(pts)).numpy()
+        expect = np.concatenate([uv.min(1), uv.max(1)], 1).clip(0, [639, 479, 639, 479])
+        assert np.allclose(boxes[v], expect, atol=1e-6)
+    a, b = np.array([0.0, 0, 10, 10]), np.array([5.0, 0, 15, 10])
+    assert box_iou(a, a) == pytest.approx(1) and box_iou(a, b) == pytest.approx(
+        box_iou(b, a)
+    ) == pytest.approx(1 / 3)
+    assert covered(a, b) == pytest.approx(0.5) and covered(np.array([20.0, 20, 30, 30]), a) == 0
