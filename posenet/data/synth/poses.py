@@ -2,8 +2,7 @@
 
 A pose is built by forward kinematics in the person's own frame (x forward, y left, z up, feet on the floor at
 z = 0), then turned by a yaw and moved to a floor position. Postures: standing, bending over the table,
-reaching,
-arms raised, arms crossed, turning; every angle is drawn inside a natural range. Lengths come from
+reaching, arms raised, arms crossed, turning; every angle is drawn inside a natural range. Lengths come from
 :mod:`posenet.data.synth.skeleton_full` scaled by the stature; the patient's lying pose is also here.
 """
 

@@ -1,11 +1,9 @@
 """Camera rigs: a random ceiling-mounted RGB-D rig around the table, or MVOR's real rig.
 
 A :class:`Rig` holds per camera the distortion-free intrinsics and the pose ``T(cam->world)`` (4x4, world z
-up,
-floor at z = 0). The dataset's reference frame is camera 0's (``posenet.cameras``); MVOR's
+up, floor at z = 0). The dataset's reference frame is camera 0's (``posenet.cameras``); MVOR's
 ``firstCamToRoomRef`` is ``T(cam0->room)``, and for the twin the world is MVOR's room frame shifted so that
-the
-floor (found from the annotated poses) is at z = 0.
+the floor (found from the annotated poses) is at z = 0.
 """
 
 from __future__ import annotations
@@ -72,9 +70,8 @@ def random_rig(
 ) -> Rig:
     """2 to 4 ceiling-mounted cameras spread around the table, 2.4-4.2 m from it, looking at it.
 
-    Cameras are spread in azimuth (at least 60 degrees apart) so every person is seen from several sides,
-    as in
-    MVOR, and are kept inside the room's shell.
+    The cameras are spread over about 250 degrees of azimuth (evenly, plus a random jitter), so that every
+    person is seen from several sides as in MVOR; they are kept inside the room's shell.
     """
     V = int(rng.integers(2, 5)) if num_views is None else num_views
     if not 1 <= V <= 8:

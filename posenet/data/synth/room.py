@@ -181,8 +181,7 @@ def sample_room(
     """A random room around a table at the origin (or at ``table_center``).
 
     ``keep_clear (N, 2)`` are floor positions (people) that floor-standing equipment must keep 600 mm away
-    from;
-    ``enclose (K, 3)`` are points (cameras) that the shell must contain.
+    from; ``enclose (K, 3)`` are points (cameras) that the shell must contain.
     """
     tc = (
         np.array([0.0, 0.0, rng.uniform(880, 1020)])
@@ -249,8 +248,7 @@ def patient_drape(
     """The drape over a patient on ``room``'s table, from the chest to beyond the feet.
 
     Returns ``(sheet, hump)``: the sheet lying on the table and hanging down its sides (room furniture),
-    and the
-    rounded hump of the body under it, which belongs to the patient's silhouette (``owner``).
+    and the rounded hump of the body under it, which belongs to the patient's silhouette (``owner``).
     """
     ax, _ = room.table_axes()
     L, W = room.table_size

@@ -1,12 +1,10 @@
 """One synthetic frame: people and room in, per-view RGB-D images and annotations out.
 
 A :class:`Frame` is a world (z up, floor at 0, mm) made of :class:`Person` s and room primitives.
-:func:`render_frame`
-ray-casts it into every camera of a :class:`~posenet.data.synth.rig.Rig`, runs the sensor models and
-measures, per
-person and view, the visible pixels: their box (none when a person is hidden or almost hidden), the 2D
-keypoints with
-MVOR's visibility flags (2 visible, 1 occluded, 0 outside the image) and the visible pixel count.
+:func:`render_frame` ray-casts it into every camera of a :class:`~posenet.data.synth.rig.Rig`, runs the
+sensor models and measures, per person and view, the visible pixels: their box (none when a person is hidden
+or almost hidden), the 2D keypoints with MVOR's visibility flags (2 visible, 1 occluded, 0 outside the
+image) and the visible pixel count.
 """
 
 from __future__ import annotations
@@ -20,7 +18,6 @@ from posenet.data.synth.primitives import Primitive
 from posenet.data.synth.raster import Intrinsics, rasterize
 from posenet.data.synth.rig import Rig
 from posenet.data.synth.sensor import Lighting, shade_colour, simulate_depth
-from posenet.data.synth.skeleton_full import NUM_MVOR_POINTS
 
 NUM_JOINTS_2D = 10
 
@@ -220,8 +217,3 @@ def render_frame(
     """Render every view of the rig."""
     prims = frame_primitives(frame)
     return [render_view(frame, prims, rig, v, rng, vis) for v in range(rig.num_views)]
-
-
-def mvor_points(person: Person) -> np.ndarray:
-    """The person's 12 MVOR points ``(12, 3)`` (world frame)."""
-    return person.points[:NUM_MVOR_POINTS]

@@ -8,12 +8,9 @@ Depth (uint16 mm, 0 = unknown), following the structured-light sensors MVOR was 
   - holes on depth edges (mixed pixels), on dark or shiny surfaces (per-material dropout) and random specks;
   - a range limit, and the invalid band on the left border of registered Kinect depth.
 Colour (uint8 RGB): Lambertian shading from a key light above, a fill light and ambient, Blinn-Phong
-highlights on
-metal and screens, per-frame exposure and white balance, vignetting, fabric texture, sensor shot and read
-noise
-and a slight blur. Colour is deliberately harder than depth: exposure, white balance and noise change from
-frame
-to frame, while the depth of a surface does not.
+highlights on metal and screens, per-frame exposure and white balance, vignetting, fabric texture, sensor
+shot and read noise and a slight blur. Colour is deliberately harder than depth: exposure, white balance and
+noise change from frame to frame, while the depth of a surface does not.
 """
 
 from __future__ import annotations

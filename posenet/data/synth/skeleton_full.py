@@ -1,12 +1,11 @@
 """The renderer's full-body skeleton: MVOR's 12 annotated points plus knees, ankles and toes.
 
 The first 12 points are exactly MVOR's ``keypoints3D`` order (the 10 joints of ``posenet.skeleton`` and the
-two
-hand points about 9 cm beyond the wrists), so a rendered body's annotation is ``points[:12]``. Segment lengths
-are MVOR's medians (measured on ``camma_mvor_2018.json``, whose shoulders, elbows and wrists sit inside the
-body, so its arms are shorter than textbook anthropometry) for a person of :data:`REF_STATURE`; the legs,
-which
-MVOR does not annotate, follow Winter's anthropometric table (hip 0.530, knee 0.285, ankle 0.039 of stature).
+two hand points about 9 cm beyond the wrists), so a rendered body's annotation is ``points[:12]``. Segment
+lengths are MVOR's medians (measured on ``camma_mvor_2018.json``, whose shoulders, elbows and wrists sit
+inside the body, so its arms are shorter than textbook anthropometry) for a person of :data:`REF_STATURE`;
+the legs, which MVOR does not annotate, follow Winter's anthropometric table (hip 0.530, knee 0.285, ankle
+0.039 of stature).
 """
 
 from __future__ import annotations
@@ -83,10 +82,8 @@ def complete_legs(points12: np.ndarray, floor_z: float = 0.0) -> np.ndarray:
     ``floor_z``.
 
     The ankles go straight below the hips (slightly forward and outward), at ankle height above the floor;
-    the knees
-    follow by two-link inverse kinematics, bending forward. Leg lengths scale with the trunk; legs too
-    short for
-    the floor are stretched by at most 15 %, then the feet hover.
+    the knees follow by two-link inverse kinematics, bending forward. Leg lengths scale with the trunk; legs
+    too short for the floor are stretched by at most 15 %, then the feet hover.
     """
     if points12.shape != (NUM_MVOR_POINTS, 3):
         raise ValueError(f"points12 must have shape (12, 3), got {points12.shape}")

@@ -6,16 +6,14 @@ and draped patient of that day where MVOR has a patient box, and a room around t
 from MVOR's ``firstCamToRoomRef`` (room z is up; the floor height is estimated from the upright poses).
 
 The table (and the patient on it) is not annotated in MVOR, so it is fitted per day: the pose (x, y, yaw,
-height)
-of a patient-sized cuboid whose projected boxes best match MVOR's patient boxes (mean IoU, random search).
+height) of a patient-sized cuboid whose projected boxes best match MVOR's patient boxes (mean IoU, random
+search).
 
 Where MVOR has no box for an annotated person in a view, that person must be hidden there, as in the real
-images:
-a boom-mounted monitor is placed on the ray between that camera and the person, sized to cover the person's
-silhouette, at the distance (among a few candidates) that least covers people who must stay visible in any
-view.
-Only if every candidate would hide someone else is the person left undrawn in that view (``Frame.hidden``);
-:func:`twin_frame` reports how often each remedy was used.
+images: a boom-mounted monitor is placed on the ray between that camera and the person, sized to cover the
+person's silhouette, at the distance (among a few candidates) that least covers people who must stay visible
+in any view. Only if every candidate would hide someone else is the person left undrawn in that view
+(``Frame.hidden``); :func:`twin_frame` reports how often each remedy was used.
 """
 
 from __future__ import annotations

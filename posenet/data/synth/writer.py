@@ -2,20 +2,18 @@
 
 Layout: ``OUT/annotations.json`` and ``OUT/dayD/camC/{color,depth}/NNNNNN.png`` (8-bit RGB; uint16 mm, 0 =
 unknown), 640x480. The json has exactly the real file's keys (``multiview_images``, ``images``,
-``annotations``,
-``annotations3D``, ``cameras_info``, ``categories``, ``dataset_info``, ``info``, ``licenses``), with
-``dataset_info.synthetic`` holding the generator settings. Image ids follow MVOR's pattern: ``D CCC FFFFFFF``
-(day, camera, frame number), e.g. 20030000235.
+``annotations``, ``annotations3D``, ``cameras_info``, ``categories``, ``dataset_info``, ``info``,
+``licenses``), with ``dataset_info.synthetic`` holding the generator settings. Image ids follow MVOR's
+pattern: ``D CCC FFFFFFF`` (day, camera, frame number), e.g. 20030000235.
 
 Cameras: ``cam_id`` C is ``cameras_info`` intrinsics index C - 1, as in MVOR. With ``--rig mvor`` every day
-uses
-MVOR's three cameras. With ``--rig random`` each day gets its own new rig, so cameras are numbered across days
-(day 1 has cams 1..V1, day 2 the next ones, ...), and all extrinsics, like the 3D joints, are expressed in the
-frame of the dataset's camera 0 (the first camera of day 1), which is what MVOR's format requires of them.
+uses MVOR's three cameras. With ``--rig random`` each day gets its own new rig, so cameras are numbered
+across days (day 1 has cams 1..V1, day 2 the next ones, ...), and all extrinsics, like the 3D joints, are
+expressed in the frame of the dataset's camera 0 (the first camera of day 1), which is what MVOR's format
+requires of them.
 
 Every frame is rendered from its own generator, seeded by (seed, day, frame number), so the output does not
-depend on
-the number of workers or on which frames are rendered.
+depend on the number of workers or on which frames are rendered.
 """
 
 from __future__ import annotations
