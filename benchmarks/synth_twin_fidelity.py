@@ -121,11 +121,30 @@ def fidelity(twin: dict, real: dict) -> dict:
     }
 
 
+def dataset_stats(ann: dict) -> dict:
+    """Statistics comparable across datasets: people, boxes and their sizes, support shares."""
+    frames = max(len(ann["multiview_images"]), 1)
+    images = max(len(ann["images"]), 1)
+    heights = np.array([a["bbox"][3] for a in ann["annotations"] if a["person_role"] == "clinician"])
+    sup = Counter(pose_support(ann))
+    n = max(sum(sup.values()), 1)
+    return {
+        "frames": frames,
+        "3d_poses_per_frame": round(len(ann["annotations3D"]) / frames, 2),
+        "boxes_per_image": round(len(ann["annotations"]) / images, 2),
+        "clinician_box_height_px_q25_q50_q75": np.percentile(heights, [25, 50, 75]).round(0).tolist(),
+        "support_share_1_2_3": [round(sup[k] / n, 3) for k in (1, 2, 3)],
+    }
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--twin", required=True, help="folder written by python -m posenet.data.synth --from-mvor")
     default = Path(__file__).resolve().parents[1] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
     p.add_argument("--mvor", default=str(default), help="the real MVOR annotation file")
+    p.add_argument(
+        "--compare", nargs="*", default=[], help="other datasets (e.g. procedural): statistics only"
+    )
     args = p.parse_args()
     twin = json.loads((Path(args.twin) / "annotations.json").read_text())
     real = json.loads(Path(args.mvor).read_text())
@@ -133,6 +152,9 @@ def main() -> None:
     cfg = Path(args.twin) / "synth_config.json"
     if cfg.is_file():
         out["render_summary"] = json.loads(cfg.read_text())["summary"]
+    out["statistics"] = {"mvor": dataset_stats(real), "twin": dataset_stats(twin)}
+    for other in args.compare:
+        out["statistics"][other] = dataset_stats(json.loads((Path(other) / "annotations.json").read_text()))
     print(json.dumps(out, indent=2))
 
 

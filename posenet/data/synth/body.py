@@ -104,7 +104,7 @@ def sample_outfit(rng: np.random.Generator, role: str = "clinician") -> Outfit:
         shoes,
         gown,
         apron,
-        bulk=float(rng.uniform(0.92, 1.15)),
+        bulk=float(rng.uniform(0.92, 1.1)),
     )
 
 
@@ -142,17 +142,17 @@ def body_primitives(points: np.ndarray, outfit: Outfit, owner: int) -> list[Prim
     axes = (left, fwd, up)
     ell(
         mid_hip + (mid_sh - mid_hip) * 0.68,
-        np.array([sh_w / 2 + 40 * k, 115 * k, 0.42 * trunk]),
+        np.array([sh_w / 2 + 40 * k, 105 * k, 0.42 * trunk]),
         axes,
         outfit.top,
     )
     ell(
         mid_hip + (mid_sh - mid_hip) * 0.32,
-        np.array([hip_w / 2 + 35 * k, 110 * k, 0.36 * trunk]),
+        np.array([hip_w / 2 + 30 * k, 98 * k, 0.36 * trunk]),
         axes,
         outfit.top,
     )
-    ell(mid_hip - up * 15 * s, np.array([hip_w / 2 + 60 * k, 115 * k, 125 * s]), axes, outfit.trousers)
+    ell(mid_hip - up * 15 * s, np.array([hip_w / 2 + 55 * k, 105 * k, 125 * s]), axes, outfit.trousers)
     if outfit.apron is not None:
         ell(
             mid_hip + (mid_sh - mid_hip) * 0.45 + fwd * 45 * k - up * 60 * s,
