@@ -13,12 +13,14 @@ from contextlib import asynccontextmanager
 import anyio
 import torch
 from fastapi import FastAPI, Request
+from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
 
 from service.errors import InputError
 from service.limits import BodyLimitMiddleware, InFlightLimiter
 from service.pipeline import ScenePipeline
 from service.routes import protected, public
+from service.schemas import SceneIn
 from service.settings import Settings
 
 
@@ -44,6 +46,20 @@ async def _input_error(request: Request, exc: InputError) -> JSONResponse:
     return JSONResponse({"detail": exc.message}, status_code=exc.status)
 
 
+def _openapi(app: FastAPI) -> dict:
+    """FastAPI's schema plus the models of the multipart ``scene`` part, which no route parameter declares."""
+    if app.openapi_schema is None:
+        schema = get_openapi(
+            title=app.title, version=app.version, description=app.description, routes=app.routes
+        )
+        scene = SceneIn.model_json_schema(ref_template="#/components/schemas/{model}")
+        components = schema.setdefault("components", {}).setdefault("schemas", {})
+        components.update(scene.pop("$defs", {}))
+        components["SceneIn"] = scene
+        app.openapi_schema = schema
+    return app.openapi_schema
+
+
 def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None = None) -> FastAPI:
     """The app; ``pipeline`` (already loaded) skips loading the models from ``settings``' checkpoints."""
     settings = settings or Settings()
@@ -64,6 +80,7 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
     app.add_exception_handler(InputError, _input_error)
     app.include_router(public)
     app.include_router(protected)
+    app.openapi = lambda: _openapi(app)
     return app
 
 

@@ -8,7 +8,7 @@ offline callers (the pipeline, the evaluation) can catch it like any other bad-a
 from __future__ import annotations
 
 BAD_REQUEST = 400  # the body is not a well-formed multipart form
-PAYLOAD_TOO_LARGE = 413  # body, image or view count beyond the configured limits
+PAYLOAD_TOO_LARGE = 413  # a body or an image beyond the configured limits
 UNSUPPORTED_MEDIA = 415  # not multipart/form-data, or an image that is neither PNG nor JPEG
 # well-formed but wrong: bad JSON, missing image, 8-bit depth, size mismatch, non-rigid pose
 UNPROCESSABLE = 422

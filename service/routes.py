@@ -23,13 +23,16 @@ from service.settings import Settings
 from service.validation import Limits, parse_scene, validate_scene
 
 public = APIRouter()
-protected = APIRouter(dependencies=[Depends(require_token)])
+_UNAUTHORIZED = {
+    401: {"model": Error, "description": "missing or wrong bearer token (when ORPOSE_TOKEN is set)"}
+}
+protected = APIRouter(dependencies=[Depends(require_token)], responses=_UNAUTHORIZED)
 
 _ERRORS = {
     400: {"model": Error, "description": "malformed multipart body"},
     401: {"model": Error, "description": "missing or wrong bearer token (only when ORPOSE_TOKEN is set)"},
     408: {"model": Error, "description": "the body did not arrive in time"},
-    413: {"model": Error, "description": "body, image or view count beyond the server's limits"},
+    413: {"model": Error, "description": "the body or an image is beyond the server's limits"},
     415: {"model": Error, "description": "not multipart/form-data, or an image that is neither PNG nor JPEG"},
     422: {"model": Error, "description": "the scene is wrong; the message names the part and the problem"},
     503: {
@@ -44,9 +47,9 @@ _SCENE_FORM = {
     "required": ["scene", "depth_0"],
     "properties": {
         "scene": {
-            "type": "string",
-            "description": "JSON of SceneIn (see components.schemas.SceneIn): per view the camera, "
-            "depth_scale_mm, and optional reference boxes / person_ids",
+            "$ref": "#/components/schemas/SceneIn",
+            "description": "the scene as JSON: per view the camera, depth_scale_mm, and optional reference "
+            "boxes / person_ids",
         },
         **{
             f"{kind}_{i}": {
@@ -63,12 +66,17 @@ _SCENE_FORM = {
             for kind in ("color", "depth")
         },
     },
-    "additionalProperties": {
-        "type": "string",
-        "format": "binary",
-        "description": "color_<i> / depth_<i> for views beyond the third",
+    "patternProperties": {
+        "^(color|depth)_[0-9]+$": {
+            "type": "string",
+            "format": "binary",
+            "description": "color_<i> / depth_<i> for views beyond the third",
+        }
     },
+    "additionalProperties": False,
 }
+# The scene part is JSON (its schema is SceneIn); the images are binary file parts.
+_SCENE_BODY = {"schema": _SCENE_FORM, "encoding": {"scene": {"contentType": "application/json"}}}
 
 
 @public.get("/health", response_model=Health, summary="Liveness: the process answers")
@@ -157,9 +165,7 @@ def _encode(result: SceneResult, decode_ms: float, t_start: float) -> bytes:
     description="multipart/form-data with a `scene` JSON part (SceneIn) and, per view i, the file parts "
     "`color_i` (PNG/JPEG) and `depth_i` (16-bit PNG). With boxes in any view, detection is skipped "
     "(reference-box mode). Every 3D coordinate in the response is in mm in the reference frame.",
-    openapi_extra={
-        "requestBody": {"required": True, "content": {"multipart/form-data": {"schema": _SCENE_FORM}}}
-    },
+    openapi_extra={"requestBody": {"required": True, "content": {_MULTIPART: _SCENE_BODY}}},
 )
 async def post_scene(request: Request, pipeline: PipelineDep, settings: SettingsDep, _: Admitted) -> Response:
     t_start = time.perf_counter()

@@ -8,18 +8,19 @@ image as sent, ``(x0, y0, x1, y1)`` with the origin at the centre of the top-lef
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from posenet.skeleton import JOINTS
 
-Box = tuple[float, float, float, float]
-Matrix4 = tuple[
-    tuple[float, float, float, float],
-    tuple[float, float, float, float],
-    tuple[float, float, float, float],
-    tuple[float, float, float, float],
+# Fixed-length lists, not tuples: FastAPI writes tuples as OpenAPI 3.0 `items` arrays, which 3.1 rejects.
+Box = Annotated[list[float], Field(min_length=4, max_length=4)]
+Vector3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Size = Annotated[list[int], Field(min_length=2, max_length=2)]
+Distortion = Annotated[list[float], Field(min_length=5, max_length=5)]
+Matrix4 = Annotated[
+    list[Annotated[list[float], Field(min_length=4, max_length=4)]], Field(min_length=4, max_length=4)
 ]
 
 
@@ -37,7 +38,7 @@ class CameraIn(BaseModel):
     cy: float = Field(
         ..., description="principal point y, pixels (MVOR: principalpoint[1]); inside the image"
     )
-    distortion: tuple[float, float, float, float, float] | None = Field(
+    distortion: Distortion | None = Field(
         None,
         description="OpenCV order (k1, k2, p1, p2, k3), or null for an ideal pinhole. MVOR stores "
         "(k1, k2, k3, p1, p2) and its own 3D annotations ignore distortion: send null for MVOR.",
@@ -49,7 +50,7 @@ class CameraIn(BaseModel):
         "The reference frame is the one these transforms map into; with MVOR's calibration "
         "(cameras_info.camParams.extrinsics[v] reshaped to 4x4) it is camera 0's, whose T is the identity.",
     )
-    image_size: tuple[int, int] | None = Field(
+    image_size: Size | None = Field(
         None,
         description="(width, height) in pixels the intrinsics were calibrated for; if given, the "
         "images "
@@ -87,13 +88,18 @@ class SceneIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
-    views: list[ViewIn] = Field(..., description="the views, in the order of their file parts")
+    # minItems documents the rule; the check itself is in service.validation, for a clearer message.
+    views: list[ViewIn] = Field(
+        ...,
+        description="the views (1 to the server's ORPOSE_MAX_VIEWS), in the order of their file parts",
+        json_schema_extra={"minItems": 1},
+    )
 
 
 # ----------------------------------------------------------------------------------------------- response
 class Joint(BaseModel):
     name: Literal[JOINTS] = Field(..., description="joint name (MVOR order: " + ", ".join(JOINTS) + ")")  # type: ignore[valid-type]
-    position: tuple[float, float, float] = Field(
+    position: Vector3 = Field(
         ...,
         description="(x, y, z) in mm in the reference frame (the frame the extrinsics map into; "
         "MVOR: camera 0's)",
@@ -156,7 +162,7 @@ class ModelInfo(BaseModel):
     modalities: list[str] = Field(
         ..., description="the image modalities the pose network reads (color, depth)"
     )
-    input_size: tuple[int, int] | None = Field(
+    input_size: Size | None = Field(
         None, description="(width, height) the pose network works at, pixels (images are resized to it)"
     )
     pose_trained_on: str = Field(..., description="what the pose network's weights were trained on")

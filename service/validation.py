@@ -16,7 +16,7 @@ import torch
 
 from posenet.cameras import Camera, is_rigid
 from service.decode import decode_color, decode_depth
-from service.errors import PAYLOAD_TOO_LARGE, InputError
+from service.errors import InputError
 from service.pipeline import FrameView
 from service.schemas import SceneIn, ViewIn
 
@@ -58,8 +58,7 @@ def parse_scene(text: str | bytes, limits: Limits) -> SceneIn:
         raise InputError("scene has 0 views; send at least one view (camera + depth_0 image)")
     if len(scene.views) > limits.max_views:
         raise InputError(
-            f"scene has {len(scene.views)} views, more than the limit of {limits.max_views}",
-            PAYLOAD_TOO_LARGE,
+            f"scene has {len(scene.views)} views, more than the limit of {limits.max_views}"
         )
     return scene
 

@@ -162,7 +162,7 @@ def bad_requests(tiny):
         ("missing scene", {"files": files}, 422, "missing form part 'scene'"),
         ("invalid scene json", form("{"), 422, "scene JSON is invalid"),
         ("0 views", form({"views": []}, [("x", b"")]), 422, "0 views"),
-        ("too many views", form({"views": scene["views"] * 2}), 413, "6 views"),
+        ("too many views", form({"views": scene["views"] * 2}), 422, "6 views"),
         ("missing depth", form(f=with_parts(depth_2=None)), 422, "missing file part depth_2"),
         ("missing colour", form(f=with_parts(color_0=None)), 422, "missing file part color_0"),
         ("corrupt colour", form(f=with_parts(color_1=("c.png", parts["color_1"][1][:500]))), 422, "color_1"),

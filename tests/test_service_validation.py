@@ -116,7 +116,7 @@ def test_valid_scene_gives_views_and_boxes():
     ("views", "files", "status", "words"),
     [
         ([], parts(0), 422, "0 views"),
-        ([{"camera": camera()}] * 5, parts(5), 413, "5 views"),
+        ([{"camera": camera()}] * 5, parts(5), 422, "5 views"),
         ([{"camera": camera()}], parts(1, depth_0=None), 422, "missing file part depth_0"),
         ([{"camera": camera()}], parts(1, color_0=None), 422, "missing file part color_0"),
         ([{"camera": camera()}], parts(1, color_1=b"x"), 422, "unexpected file part"),
