@@ -8,7 +8,9 @@ MVOR-format dataset (``conftest.write_tiny_mvor``) and are sent exactly as the b
 from __future__ import annotations
 
 import json
+import os
 import socket
+import subprocess
 import time
 
 import cv2
@@ -16,7 +18,7 @@ import httpx
 import numpy as np
 import pytest
 from conftest import write_tiny_mvor
-from service_harness import Server, tiny_checkpoints
+from service_harness import REPO_ROOT, Server, tiny_checkpoints
 
 from posenet.data.mvor import MvorDataset
 from posenet.skeleton import JOINTS
@@ -234,3 +236,22 @@ def test_overload_gets_503_and_a_slow_body_408(server, tiny):
     finally:
         slow.close()
     assert post(server, scene, files).status_code == 200
+
+
+@pytest.mark.parametrize("scene", ["scene.json", "scene_boxes.json"])
+def test_example_frame_and_curl_script(server, scene):
+    env = {**os.environ, "URL": str(server.base_url).rstrip("/"), "ORPOSE_TOKEN": TOKEN}
+    run = subprocess.run(
+        ["bash", str(REPO_ROOT / "examples" / "curl.sh"), scene],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+    out = json.loads(run.stdout)
+    assert out["mode"] == ("reference_boxes" if scene == "scene_boxes.json" else "detector")
+    for person in out["persons"]:
+        check_person_shape(person)
+    if scene == "scene_boxes.json":
+        assert [p["id"] for p in out["persons"]] == [0]
