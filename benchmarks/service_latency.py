@@ -1,0 +1,212 @@
+"""Latency and throughput of the service through real HTTP, per stage, on 3 views of 640x480.
+
+    python benchmarks/service_latency.py                                  # the shipped weights
+    python benchmarks/service_latency.py --pose-checkpoint RUN/best --detector-checkpoint DET
+    python benchmarks/service_latency.py --tiny                           # random-init models (plumbing only)
+
+It starts ``uvicorn service.app:app`` in a subprocess and posts frames of an MVOR-format dataset (by default
+the first 12 frames of the MVOR twin, rendered into a temporary folder with ``posenet.data.synth``). Four
+configurations: a frame with 1 person and one with 3 persons, each with reference boxes (detector off) and
+with the detector on. For each it reports the client-side latency p50/p95 over ``--requests`` sequential
+requests and the server's per-stage breakdown (decode, detect, match, pose, encode), then the throughput at
+concurrency 1 and 4 (detector on, 3-person frame), and the server's peak RSS. ``--out`` also writes JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "tests"))  # the test harness starts and stops the server
+
+from service_harness import Server, tiny_checkpoints  # noqa: E402
+
+from detector.matching import match_boxes  # noqa: E402
+from posenet.data.images import read_depth  # noqa: E402
+from posenet.data.mvor import MvorDataset  # noqa: E402
+from service.client import scene_request  # noqa: E402
+
+MVOR_JSON = REPO.parent / "shared" / "mvor" / "camma_mvor_2018.json"
+STAGES = ("decode", "detect", "match", "pose", "encode", "total")
+
+
+def render_twin(folder: Path, annotations: Path, frames: int) -> Path:
+    cmd = [sys.executable, "-m", "posenet.data.synth", "--out", str(folder), "--from-mvor", str(annotations),
+           "--limit", str(frames), "--quiet"]  # fmt: skip
+    subprocess.run(cmd, cwd=REPO, check=True, stdout=subprocess.DEVNULL)
+    return folder
+
+
+def groups_of(sample, root: Path) -> list[list[int]]:
+    """A frame's annotated boxes grouped into persons by the 3D matcher: per person, per view an index."""
+    depths = [read_depth(root / v.file_name.replace("/color/", "/depth/")) for v in sample.views]
+    groups = match_boxes([v.boxes for v in sample.views], depths, [v.camera for v in sample.views])
+    return [list(g.indices) for g in groups]
+
+
+def reference_request(sample, root: Path, persons: int) -> tuple[dict, list]:
+    """A request with reference boxes for exactly ``persons`` persons (the largest groups of the frame)."""
+    scene, files = scene_request(sample, root, reference_boxes=False)
+    groups = sorted(groups_of(sample, root), key=lambda g: -sum(i >= 0 for i in g))[:persons]
+    if len(groups) < persons:
+        raise SystemExit(f"frame {sample.id} has only {len(groups)} persons, {persons} needed")
+    for v, view in enumerate(scene["views"]):
+        view["boxes"] = [sample.views[v].boxes[g[v]].tolist() for g in groups if g[v] >= 0]
+        view["person_ids"] = [p for p, g in enumerate(groups) if g[v] >= 0]
+    return scene, files
+
+
+def pick_frames(ds: MvorDataset, root: Path) -> dict[int, int]:
+    """Dataset indices of a frame with 1 person and one with at least 3 (by the matcher's groups)."""
+    found = {}
+    for i in range(len(ds)):
+        n = len(groups_of(ds[i], root))
+        if n == 1 and 1 not in found:
+            found[1] = i
+        if n >= 3 and 3 not in found:
+            found[3] = i
+    if len(found) < 2:
+        raise SystemExit(f"need a 1-person and a 3-person frame in the dataset, found {found}")
+    return found
+
+
+def post(client: httpx.Client, scene: dict, files: list) -> tuple[float, dict]:
+    t0 = time.perf_counter()
+    r = client.post("/scenes", data={"scene": json.dumps(scene)}, files=files)
+    latency = (time.perf_counter() - t0) * 1e3
+    if r.status_code != 200:
+        raise SystemExit(f"request failed: {r.status_code} {r.text}")
+    return latency, r.json()
+
+
+def pct(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q))
+
+
+def measure(client, scene, files, requests: int, warmup: int = 2) -> dict:
+    for _ in range(warmup):
+        post(client, scene, files)
+    latencies, stages, persons = [], {s: [] for s in STAGES}, []
+    for _ in range(requests):
+        latency, out = post(client, scene, files)
+        latencies.append(latency)
+        persons.append(len(out["persons"]))
+        for s in STAGES:
+            stages[s].append(out["timings"][s])
+    return {
+        "latency_ms": {"p50": pct(latencies, 50), "p95": pct(latencies, 95)},
+        "stages_ms_p50": {s: pct(v, 50) for s, v in stages.items()},
+        "persons": statistics.mode(persons),
+    }
+
+
+def throughput(url: str, scene, files, concurrency: int, requests: int) -> float:
+    limits = httpx.Limits(max_connections=concurrency)
+    with (
+        httpx.Client(base_url=url, limits=limits, timeout=300) as client,
+        ThreadPoolExecutor(concurrency) as pool,
+    ):
+        t0 = time.perf_counter()
+        list(pool.map(lambda _: post(client, scene, files), range(requests)))
+        return requests / (time.perf_counter() - t0)
+
+
+def peak_rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def main(argv: list[str] | None = None) -> dict:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    parser.add_argument("--pose-checkpoint", help="pose network checkpoint (default: the shipped weights)")
+    parser.add_argument("--detector-checkpoint", help="detector checkpoint (default: the shipped weights)")
+    parser.add_argument(
+        "--tiny", action="store_true", help="random-init models instead (measures the plumbing)"
+    )
+    parser.add_argument("--data", type=Path, help="MVOR-format dataset (default: render 12 MVOR-twin frames)")
+    parser.add_argument(
+        "--annotations", type=Path, help="its annotation json (default: DATA/annotations.json)"
+    )
+    parser.add_argument("--mvor", type=Path, default=MVOR_JSON, help="MVOR json for the twin render")
+    parser.add_argument("--requests", type=int, default=20, help="timed requests per configuration")
+    parser.add_argument("--threads", type=int, default=2, help="ORPOSE_THREADS of the server")
+    parser.add_argument("--device", default="cpu", help="ORPOSE_DEVICE of the server")
+    parser.add_argument("--out", type=Path, help="also write the results as JSON here")
+    args = parser.parse_args(argv)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        root = args.data or render_twin(tmp / "twin", args.mvor, 12)
+        ds = MvorDataset(None, args.annotations or root / "annotations.json")
+        env = {
+            "ORPOSE_THREADS": str(args.threads),
+            "ORPOSE_DEVICE": args.device,
+            "ORPOSE_MAX_IN_FLIGHT": "16",
+        }
+        pose, det = (
+            tiny_checkpoints(tmp / "ckpt") if args.tiny else (args.pose_checkpoint, args.detector_checkpoint)
+        )
+        env.update(
+            {
+                k: str(v)
+                for k, v in (("ORPOSE_POSE_CHECKPOINT", pose), ("ORPOSE_DETECTOR_CHECKPOINT", det))
+                if v
+            }
+        )
+        frames = pick_frames(ds, root)
+        server = Server(env)
+        with server as url, httpx.Client(base_url=url, timeout=300) as client:
+            model = client.get("/model").json()
+            results = {"model": model, "threads": args.threads, "configs": {}}
+            for persons, index in frames.items():
+                sample = ds[index]
+                for mode in ("reference_boxes", "detector"):
+                    scene, files = (reference_request(sample, root, persons) if mode == "reference_boxes"
+                                    else scene_request(sample, root, reference_boxes=False))  # fmt: skip
+                    key = f"{persons}p_{mode}"
+                    results["configs"][key] = {
+                        "frame": sample.id,
+                        **measure(client, scene, files, args.requests),
+                    }
+            scene, files = scene_request(ds[frames[3]], root, reference_boxes=False)
+            results["throughput_fps"] = {
+                str(c): throughput(url, scene, files, c, max(8, args.requests)) for c in (1, 4)
+            }
+            results["peak_rss_mb"] = peak_rss_mb(server.proc.pid)
+    print(format_results(results))
+    if args.out:
+        args.out.write_text(json.dumps(results, indent=2))
+    return results
+
+
+def format_results(r: dict) -> str:
+    lines = [f"threads={r['threads']}  pose trained on: {r['model']['pose_trained_on']}", ""]
+    head = f"{'config':<22}{'persons':>8}{'p50 ms':>9}{'p95 ms':>9}" + "".join(f"{s:>9}" for s in STAGES)
+    lines += [head + "   (stages: server-side p50, ms)", "-" * len(head)]
+    for key, c in r["configs"].items():
+        stages = "".join(f"{c['stages_ms_p50'][s]:>9.1f}" for s in STAGES)
+        lines.append(
+            f"{key:<22}{c['persons']:>8}{c['latency_ms']['p50']:>9.1f}{c['latency_ms']['p95']:>9.1f}{stages}"
+        )
+    tp = r["throughput_fps"]
+    lines += ["", f"throughput (detector on, 3-person frame): {tp['1']:.2f} frames/s at concurrency 1, "
+              f"{tp['4']:.2f} at concurrency 4", f"server peak RSS: {r['peak_rss_mb']:.0f} MB"]  # fmt: skip
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()
