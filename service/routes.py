@@ -125,6 +125,11 @@ async def _read_form(request: Request, settings: Settings) -> tuple[bytes | None
                 scene = data
             elif name in files:
                 raise InputError(f"the form has more than one {name!r} part")
+            elif not isinstance(value, UploadFile):
+                # A part without a filename arrives as text, and text decoding would corrupt image bytes.
+                raise InputError(
+                    f"{name} must be a file part (with a filename), e.g. curl -F {name}=@image.png"
+                )
             else:
                 files[name] = data
     finally:

@@ -57,9 +57,7 @@ def parse_scene(text: str | bytes, limits: Limits) -> SceneIn:
     if not scene.views:
         raise InputError("scene has 0 views; send at least one view (camera + depth_0 image)")
     if len(scene.views) > limits.max_views:
-        raise InputError(
-            f"scene has {len(scene.views)} views, more than the limit of {limits.max_views}"
-        )
+        raise InputError(f"scene has {len(scene.views)} views, more than the limit of {limits.max_views}")
     return scene
 
 

@@ -169,6 +169,8 @@ def bad_requests(tiny):
         ("missing colour", form(f=with_parts(color_0=None)), 422, "missing file part color_0"),
         ("corrupt colour", form(f=with_parts(color_1=("c.png", parts["color_1"][1][:500]))), 422, "color_1"),
         ("not an image", form(f=with_parts(color_1=("c.gif", b"GIF89a"))), 415, "neither a PNG nor a JPEG"),
+        ("image as a text field", {"data": {"scene": json.dumps(scene), "depth_0": "abc"},
+                                   "files": with_parts(depth_0=None)}, 422, "must be a file part"),
         ("8-bit depth", form(f=with_parts(depth_0=depth8)), 422, "8-bit"),
         ("colour/depth sizes", form(f=with_parts(depth_1=small)), 422, "colour and depth"),
         ("image vs intrinsics", form(with_camera(image_size=[320, 240])), 422, "image_size is 320x240"),
