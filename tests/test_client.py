@@ -16,8 +16,9 @@ import pytest
 from conftest import write_tiny_mvor
 from service_harness import REPO_ROOT, Server, tiny_checkpoints
 
+from posenet.data.mvor import MvorDataset
 from service.association import assign, mean_view_iou
-from service.client import append_line, read_done
+from service.client import append_line, predictions, read_done
 
 
 def test_read_done_drops_a_torn_last_line_and_appends_cleanly(tmp_path):
@@ -91,3 +92,26 @@ def test_client_resumes_after_being_killed(tmp_path):
     assert f"{written} already in" in second.stdout and f"{len(ids) - written} done now" in second.stdout
     assert "MPJPE (cm) per number of supporting views" in second.stdout
     assert "0 without a prediction" in second.stdout  # every annotated pose got a prediction
+
+
+def test_detector_mode_predictions_get_ground_truth_ids_by_iou(tiny_mvor_dataset):
+    data = tiny_mvor_dataset
+    ds = MvorDataset(None, data.gt)
+    sample = ds[0]
+    gt_ids = sorted(set(sample.person_ids.tolist()))
+    # A detector-mode response whose persons are the annotated ones, shuffled, boxes jittered by a few pixels.
+    rng = np.random.default_rng(1)
+    persons = []
+    for n, pid in enumerate(reversed(gt_ids)):
+        views = [{"view": v, "box": (np.asarray(b) + rng.normal(0, 3, 4)).tolist(), "score": 0.9}
+                 for v, b in enumerate(sample.person_boxes(pid)) if b is not None]  # fmt: skip
+        joints = [{"name": "j", "position": [float(n), 0.0, 0.0], "confidence": 1.0}] * 10
+        persons.append({"id": n, "joints": joints, "views": views})
+    stray = {"view": 0, "box": [0, 0, 5, 5], "score": 0.6}  # overlaps no annotated box: no identity
+    persons.append({"id": 9, "joints": persons[0]["joints"], "views": [stray]})
+    lines = {
+        sample.id: {"id": sample.id, "status": 200, "response": {"mode": "detector", "persons": persons}}
+    }
+    preds = predictions(lines, ds)
+    expected = [(pid, float(n)) for n, pid in enumerate(reversed(gt_ids))]
+    assert [(p["person_id"], p["keypoints3D"][0]) for p in preds] == expected

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import socket
 import subprocess
 import time
@@ -240,6 +241,7 @@ def test_overload_gets_503_and_a_slow_body_408(server, tiny):
     assert post(server, scene, files).status_code == 200
 
 
+@pytest.mark.skipif(shutil.which("curl") is None, reason="the example script needs curl on PATH")
 @pytest.mark.parametrize("scene", ["scene.json", "scene_boxes.json"])
 def test_example_frame_and_curl_script(server, scene):
     env = {**os.environ, "URL": str(server.base_url).rstrip("/"), "ORPOSE_TOKEN": TOKEN}
