@@ -8,12 +8,14 @@ import pytest
 from posenet.data.synth.primitives import (
     BOX,
     CAPSULE,
+    CONE,
     ELLIPSOID,
     HIT,
     box,
     capsule,
     ellipsoid,
     normals,
+    round_cone,
     shell,
 )
 from posenet.data.synth.raster import Intrinsics, rasterize, screen_rect
@@ -32,6 +34,7 @@ def _shapes(rng: np.random.Generator):
         ellipsoid(centre, rng.uniform(80, 300, 3), R),
         capsule(centre - R[:, 0] * 250, centre + R[:, 0] * 250, rng.uniform(40, 120)),
         box(centre, rng.uniform(80, 300, 3), R),
+        round_cone(centre - R[:, 1] * 220, centre + R[:, 1] * 220, rng.uniform(90, 140), rng.uniform(30, 80)),
     ]
 
 
@@ -44,6 +47,21 @@ def _sdf(p, pts: np.ndarray) -> np.ndarray:
         ba = p.b - p.a
         s = np.clip((pts - p.a) @ ba / (ba @ ba), 0, 1)
         return np.linalg.norm(pts - (p.a + s[:, None] * ba), axis=1) - p.size[0]
+    if p.kind == CONE:  # Inigo Quilez's exact sdRoundCone
+        r1, r2 = p.size[0], p.size[1]
+        ba = p.b - p.a
+        l2 = ba @ ba
+        rr = r1 - r2
+        a2 = l2 - rr * rr
+        pa = pts - p.a
+        y = pa @ ba
+        z = y - l2
+        x2 = (((pa * l2) - np.outer(y, ba)) ** 2).sum(1)
+        y2, z2 = y * y * l2, z * z * l2
+        k = np.sign(rr) * rr * rr * x2
+        side = (np.sqrt(x2 * a2 / l2) + y * rr) / l2 - r1
+        out = np.where(np.sign(y) * a2 * y2 < k, np.sqrt(x2 + y2) / l2 - r1, side)
+        return np.where(np.sign(z) * a2 * z2 > k, np.sqrt(x2 + z2) / l2 - r2, out)
     local = (pts - p.center) @ p.rotation / p.size
     return np.abs(local).max(axis=1) - 1
 
@@ -59,8 +77,8 @@ def test_hits_lie_on_the_surface_and_are_the_first_crossing(seed):
         assert hit.any() and (~hit).any(), "rays should both hit and miss"
         dirs = np.stack([dx[0], dy[0], np.ones(400)], 1)
         on = dirs[hit] * t[hit, None]
-        scale = 1.0 if p.kind == CAPSULE else 1e-3  # capsule sdf is in mm, the others relative
-        assert np.abs(_sdf(p, on)).max() < (0.5 if p.kind == CAPSULE else 2e-3) / scale * scale
+        in_mm = p.kind in (CAPSULE, CONE)  # these implicit values are distances in mm, the others relative
+        assert np.abs(_sdf(p, on)).max() < (0.5 if in_mm else 2e-3)
         # The point slightly before the hit is outside: the hit is the first crossing.
         before = dirs[hit] * (t[hit, None] - 2.0)
         assert (_sdf(p, before) > 0).all()

@@ -1,9 +1,10 @@
 """Articulated bodies from smooth primitives, dressed in OR clothing.
 
 :func:`body_primitives` turns a full skeleton (:mod:`posenet.data.synth.skeleton_full`, z up, mm) into about
-twenty capsules and ellipsoids: head, cap, mask, neck, shoulders, chest, belly, pelvis, arms, gloved hands,
-thighs, shins and shoes, plus a gown skirt or a lead apron when the outfit has one. Thicknesses scale with the
-stature (trunk length); colours come from an :class:`Outfit` drawn by :func:`sample_outfit`.
+twenty capsules, round cones and ellipsoids: head, cap, mask, neck, shoulders, chest, belly, pelvis, arms,
+gloved hands, thighs, shins and shoes (limbs taper from joint to joint), plus a gown skirt or a lead apron
+when the outfit has one. Thicknesses scale with the stature (trunk length); colours come from an
+:class:`Outfit` drawn by :func:`sample_outfit`.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from posenet.data.synth.primitives import Material, Primitive, capsule, ellipsoid
+from posenet.data.synth.primitives import Material, Primitive, capsule, ellipsoid, round_cone
 from posenet.data.synth.skeleton_full import LENGTHS, F, body_frame, unit
 
 # Linear-RGB reflectances. Scrubs and gowns: the blues and greens of OR textiles.
@@ -124,6 +125,12 @@ def body_primitives(points: np.ndarray, outfit: Outfit, owner: int) -> list[Prim
     def cap_(a, b, r, mat):
         out.append(capsule(a, b, r, owner, mat))
 
+    def limb(a, b, ra, rb, mat):  # tapered; a bone shorter than the taper (odd annotations) stays a capsule
+        if np.linalg.norm(b - a) > abs(ra - rb) + 1:
+            out.append(round_cone(a, b, ra, rb, owner, mat))
+        else:
+            cap_(a, b, (ra + rb) / 2, mat)
+
     def ell(c, radii, axes, mat):
         out.append(ellipsoid(c, radii, np.stack(axes, axis=1), owner, mat))
 
@@ -162,8 +169,10 @@ def body_primitives(points: np.ndarray, outfit: Outfit, owner: int) -> list[Prim
         )
     # Arms and hands.
     for side in ("left", "right"):
-        cap_(P[f"{side}_shoulder"], P[f"{side}_elbow"], 47 * k, outfit.top)
-        cap_(P[f"{side}_elbow"], P[f"{side}_wrist"], 38 * k, outfit.top if outfit.gown else outfit.skin)
+        limb(P[f"{side}_shoulder"], P[f"{side}_elbow"], 52 * k, 40 * k, outfit.top)
+        limb(
+            P[f"{side}_elbow"], P[f"{side}_wrist"], 39 * k, 29 * k, outfit.top if outfit.gown else outfit.skin
+        )
         hand_dir = unit(P[f"{side}_hand"] - P[f"{side}_wrist"])
         cap_(
             P[f"{side}_wrist"] + hand_dir * 15 * s,
@@ -173,8 +182,8 @@ def body_primitives(points: np.ndarray, outfit: Outfit, owner: int) -> list[Prim
         )
     # Legs and shoes.
     for side in ("left", "right"):
-        cap_(P[f"{side}_hip"], P[f"{side}_knee"], 72 * k, outfit.trousers)
-        cap_(P[f"{side}_knee"], P[f"{side}_ankle"], 55 * k, outfit.trousers)
+        limb(P[f"{side}_hip"], P[f"{side}_knee"], 82 * k, 56 * k, outfit.trousers)
+        limb(P[f"{side}_knee"], P[f"{side}_ankle"], 54 * k, 38 * k, outfit.trousers)
         cap_(P[f"{side}_ankle"] - up * 25 * s, P[f"{side}_toe"], 42 * s, outfit.shoes)
     if outfit.gown:  # a gown skirt down to the knees
         knees = (P["left_knee"] + P["right_knee"]) / 2

@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-ELLIPSOID, CAPSULE, BOX, SHELL = 0, 1, 2, 3
+ELLIPSOID, CAPSULE, BOX, SHELL, CONE = 0, 1, 2, 3, 4
 
 # Owner ids below zero are not persons (persons are 0, 1, 2, ...).
 OWNER_ROOM = -1  # furniture and equipment
@@ -72,6 +72,8 @@ class Primitive:
         """Spheres (centre, radius) whose union contains the shape, for the screen rectangle."""
         if self.kind == CAPSULE:
             return [(self.a, float(self.size[0])), (self.b, float(self.size[0]))]
+        if self.kind == CONE:  # the hull of two spheres projects inside the box of their projections
+            return [(self.a, float(self.size[0])), (self.b, float(self.size[1]))]
         if self.kind == ELLIPSOID:
             return [(self.center, float(self.size.max()))]
         return [(self.center, float(np.linalg.norm(self.size)))]
@@ -86,6 +88,17 @@ def capsule(a, b, radius, owner=OWNER_ROOM, material=None) -> Primitive:
     a, b = np.asarray(a, float), np.asarray(b, float)
     size = np.array([radius, 0.0, 0.0])
     return Primitive(CAPSULE, (a + b) / 2, np.eye(3), size, owner, material, a, b)
+
+
+def round_cone(a, b, radius_a, radius_b, owner=OWNER_ROOM, material=None) -> Primitive:
+    """A tapered limb: the convex hull of spheres of ``radius_a`` at ``a`` and ``radius_b`` at ``b``."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if np.linalg.norm(b - a) <= abs(radius_a - radius_b):
+        raise ValueError(
+            f"round cone: one sphere contains the other (|b - a| = {np.linalg.norm(b - a):.1f} mm)"
+        )
+    size = np.array([radius_a, radius_b, 0.0])
+    return Primitive(CONE, (a + b) / 2, np.eye(3), size, owner, material, a, b)
 
 
 def box(center, half_sizes, rotation=None, owner=OWNER_ROOM, material=None) -> Primitive:
@@ -178,7 +191,35 @@ def hit_shell(p: Primitive, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
     return np.where(t_far > 0, t_far, np.inf)
 
 
-HIT = {ELLIPSOID: hit_ellipsoid, CAPSULE: hit_capsule, BOX: hit_box, SHELL: hit_shell}
+def hit_round_cone(p: Primitive, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """Inigo Quilez's rounded-cone intersection, on unit ray directions (t is then rescaled to depth)."""
+    ra, rb = float(p.size[0]), float(p.size[1])
+    inv = 1.0 / np.sqrt(dx * dx + dy * dy + 1.0)  # unit directions: (dx, dy, 1) * inv
+    ba = p.b - p.a
+    oa, ob = -p.a, -p.b
+    rr = ra - rb
+    m0, m1, m5, m7 = float(ba @ ba), float(ba @ oa), float(oa @ oa), float(ob @ ob)
+    m2 = (ba[0] * dx + ba[1] * dy + ba[2]) * inv
+    m3 = (oa[0] * dx + oa[1] * dy + oa[2]) * inv
+    m6 = (ob[0] * dx + ob[1] * dy + ob[2]) * inv
+    d2 = m0 - rr * rr
+    k2 = d2 - m2 * m2
+    k1 = d2 * m3 - m1 * m2 + m2 * rr * ra
+    k0 = d2 * m5 - m1 * m1 + m1 * rr * ra * 2.0 - m0 * ra * ra
+    h = k1 * k1 - k0 * k2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (-np.sqrt(h) - k1) / k2
+        y = m1 - ra * rr + t * m2
+        body = np.where((h >= 0) & (y > 0) & (y < d2), t, np.inf)
+        h1 = m3 * m3 - m5 + ra * ra
+        h2 = m6 * m6 - m7 + rb * rb
+        cap_a = np.where(h1 > 0, -m3 - np.sqrt(h1), np.inf)
+        cap_b = np.where(h2 > 0, -m6 - np.sqrt(h2), np.inf)
+    # The cone's side is tangent to both spheres, so the nearest valid hit of the three is the surface.
+    return np.minimum(body, np.minimum(cap_a, cap_b)) * inv  # distance along the unit ray to depth
+
+
+HIT = {ELLIPSOID: hit_ellipsoid, CAPSULE: hit_capsule, BOX: hit_box, SHELL: hit_shell, CONE: hit_round_cone}
 
 
 def normals(p: Primitive, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -188,6 +229,8 @@ def normals(p: Primitive, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.nda
     1-D pass (much faster in numpy than (N, 3) @ (3, 3) products). The shell's normals point into the room,
     since it is seen from inside.
     """
+    if p.kind == CONE:
+        return _round_cone_normals(p, x, y, z)
     if p.kind == CAPSULE:
         a, ba = p.a, p.b - p.a
         s = ((x - a[0]) * ba[0] + (y - a[1]) * ba[1] + (z - a[2]) * ba[2]) * (1.0 / float(ba @ ba))
@@ -210,4 +253,24 @@ def normals(p: Primitive, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.nda
             w = [np.where(m, np.sign(local[i]) * sign, 0.0) for i, m in enumerate((ax0, ax1, ax2))]
             n = [w[0] * R[j, 0] + w[1] * R[j, 1] + w[2] * R[j, 2] for j in range(3)]
     n = np.stack(n).astype(np.float32)  # (3, N)
+    return n / np.maximum(np.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2), 1e-9)
+
+
+def _round_cone_normals(p: Primitive, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Normals ``(3, N)`` of a round cone: sphere caps beyond the tangent circles, the tilted side between."""
+    ra, rb = float(p.size[0]), float(p.size[1])
+    ba = p.b - p.a
+    length = float(np.linalg.norm(ba))
+    e = ba / length
+    sin_a = (ra - rb) / length  # the side's normal leans toward the thin end by this much
+    cos_a = np.sqrt(max(1 - sin_a * sin_a, 0.0))
+    d = (x - p.a[0], y - p.a[1], z - p.a[2])
+    along = d[0] * e[0] + d[1] * e[1] + d[2] * e[2]
+    q = [d[i] - along * e[i] for i in range(3)]  # radial part
+    qn = np.maximum(np.sqrt(q[0] ** 2 + q[1] ** 2 + q[2] ** 2), 1e-9)
+    side = [cos_a * q[i] / qn + sin_a * e[i] for i in range(3)]
+    on_a = along < ra * sin_a  # tangent circles sit where the sphere normal has axial part sin_a
+    on_b = along > length + rb * sin_a
+    n = [np.where(on_a, d[i] / ra, np.where(on_b, (d[i] - ba[i]) / rb, side[i])) for i in range(3)]
+    n = np.stack(n).astype(np.float32)
     return n / np.maximum(np.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2), 1e-9)
