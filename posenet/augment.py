@@ -45,6 +45,7 @@ class AugmentConfig:
     brightness: float = 0.25  # factor 1 + U(-b, b)
     contrast: float = 0.25
     saturation: float = 0.25
+    occlude: float = 0.0  # probability per network image of one random occluder (an extension; paper: none)
 
 
 # ----------------------------------------------------------------------------- affine building blocks
@@ -153,6 +154,35 @@ def random_crop_window(
     x0 = torch.randint(0, in_size[0] - out_size[0] + 1, (n,), generator=generator).float()
     y0 = torch.randint(0, in_size[1] - out_size[1] + 1, (n,), generator=generator).float()
     return translation(-x0, -y0)
+
+
+def occluders(images: Tensor, probability: float, generator: torch.Generator | None = None) -> Tensor:
+    """Paste one random rectangle of noise (10-40 % of each side) over each image of ``images (N, C, H, W)``
+    with ``probability``, in every channel except the last (the box mask stays: the person is still there).
+
+    This hides body parts from the network only; the points that are lifted keep their real depth, so, like
+    colour jitter, it needs no inverse. It imitates the occlusion by staff and equipment that dominates the
+    error tail on MVOR-like scenes."""
+    N, C, H, W = images.shape
+    u = torch.rand(N, 5, generator=generator)
+    h, w = (0.1 + 0.3 * u[:, 0]) * H, (0.1 + 0.3 * u[:, 1]) * W
+    y0, x0 = u[:, 2] * (H - h), u[:, 3] * (W - w)
+    on = u[:, 4] < probability
+    ys = torch.arange(H).view(1, H, 1)
+    xs = torch.arange(W).view(1, 1, W)
+    inside = (
+        (ys >= y0.view(N, 1, 1))
+        & (ys < (y0 + h).view(N, 1, 1))
+        & (xs >= x0.view(N, 1, 1))
+        & (xs < (x0 + w).view(N, 1, 1))
+    )
+    inside = (inside & on.view(N, 1, 1)).unsqueeze(1).to(images.device)  # (N, 1, H, W)
+    noise = (torch.rand(N, C - 1, 1, 1, generator=generator) * 2 - 1).to(
+        images
+    )  # a flat random value per channel
+    out = images.clone()
+    out[:, :-1] = torch.where(inside, noise.expand(N, C - 1, H, W), images[:, :-1])
+    return out
 
 
 def color_jitter(rgb: Tensor, config: AugmentConfig, generator: torch.Generator | None = None) -> Tensor:

@@ -245,6 +245,8 @@ def build_scene(
             channels += [torch.where(known, rel, torch.zeros_like(rel)), known.float()]
     channels.append(mask.view(-1, 1, h, w).float())
     images = torch.cat(channels, dim=1)  # (P*V, C, h, w)
+    if training and augment.occlude > 0:
+        images = aug.occluders(images, augment.occlude, generator)
 
     # ---- the points to lift
     if config.mode == "crop":

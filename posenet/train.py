@@ -142,6 +142,8 @@ def resolve_config(args: argparse.Namespace) -> TrainConfig:
             augment[key] = getattr(args, key)
     if args.rotate is not None:
         augment["rotate_deg"] = args.rotate
+    if args.occlude is not None:
+        augment["occlude"] = args.occlude
     top = {f.name for f in dataclasses.fields(TrainConfig)} - {
         "model",
         "augment",
@@ -430,6 +432,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--color", action=argparse.BooleanOptionalAction, help="brightness/contrast/saturation jitter"
     )
+    g.add_argument("--occlude", type=float, help="probability of an occluder per crop (extension; 0: off)")
     g = p.add_argument_group("runtime")
     g.add_argument("--threads", type=int, help="torch CPU threads")
     g.add_argument("--device", help="cpu or cuda (default: cuda if available)")

@@ -119,3 +119,17 @@ def test_affine_inverse_matches_linalg():
     J, _ = aug.random_jitter(6, aug.AugmentConfig(), (48, 32), person_crop=True, generator=g)
     A = J @ aug.box_crop_affine(torch.rand(6, 4, generator=g).sort(-1).values * 100, 48)
     torch.testing.assert_close(aug.affine_inverse(A), torch.linalg.inv(A), atol=1e-4, rtol=1e-4)
+
+
+def test_occluders_cover_one_rectangle_and_keep_the_mask():
+    g = torch.Generator().manual_seed(2)
+    x = torch.randn(8, 5, 20, 24)
+    y = aug.occluders(x, 1.0, g)
+    torch.testing.assert_close(y[:, -1], x[:, -1])
+    changed = (y != x)[:, :-1].any(1)  # (N, H, W)
+    for n in range(8):
+        rows, cols = changed[n].any(1).nonzero(), changed[n].any(0).nonzero()
+        area = (rows.max() - rows.min() + 1) * (cols.max() - cols.min() + 1)
+        assert changed[n].sum() == area  # exactly one filled rectangle
+        assert 0.01 * 20 * 24 <= area <= 0.41 * 0.41 * 20 * 24 + 25
+    torch.testing.assert_close(aug.occluders(x, 0.0, g), x)
