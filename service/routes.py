@@ -12,6 +12,7 @@ import anyio
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
+from starlette.requests import ClientDisconnect
 
 from posenet.skeleton import JOINTS
 from service.deps import Admitted, PipelineDep, SettingsDep, require_token
@@ -115,6 +116,8 @@ async def _read_form(request: Request, settings: Settings) -> tuple[bytes | None
         form = await parser.parse()
     except MultiPartException as exc:
         raise HTTPException(400, f"malformed multipart body: {exc.message}") from None
+    except ClientDisconnect:  # nobody is left to answer; a 400 rather than a 500 traceback in the log
+        raise HTTPException(400, "the client disconnected before the body was complete") from None
     scene, files = None, {}
     try:
         for name, value in form.multi_items():
