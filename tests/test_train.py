@@ -16,6 +16,7 @@ from posenet.model import ModelConfig, PoseNet
 from posenet.predict import main as predict_main
 from posenet.train import lr_factor
 from posenet.train import main as train_main
+from posenet.visualize import main as visualize_main
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = ["--subsample", "1", "--crop-size", "32", "--base", "8", "--threads", "1"]
@@ -85,6 +86,10 @@ def test_cli_train_resume_predict(tiny, tmp_path):
     assert predict_main([*args, "--out", str(pred)]) == 0
     preds = json.loads(pred.read_text())
     assert len(preds) == 6 and all(len(p["keypoints3D"]) == 30 for p in preds)
+    png = tmp_path / "scene.png"
+    assert visualize_main(["--data", str(root), "--annotations", str(ann), "--checkpoint", str(run),
+                           "--days", "2", "--frame", "1", "--out", str(png)]) == 0  # fmt: skip
+    assert png.read_bytes()[:4] == b"\x89PNG"
     # a fresh run into an existing folder must not silently overwrite it
     with pytest.raises(FileExistsError, match="--resume"):
         train_main([*base, *TINY[:-2]])
