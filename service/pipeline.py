@@ -39,6 +39,10 @@ class FrameView(NamedTuple):
 class PipelineConfig:
     # The paper's matching threshold t = 75 cm, chosen there by visual inspection.
     match_threshold_mm: float = 750.0
+    # The matcher enumerates every combination of mutually close boxes. Many boxes at one 3D spot in many
+    # views make that exponential (4 views x 64 identical boxes: 17 M combinations, gigabytes); 300 k take
+    # about 2 s here.
+    max_match_combinations: int = 300_000
 
 
 @dataclass
@@ -130,10 +134,32 @@ class ScenePipeline:
         return cls(pose, detector, config, read_config(detector_checkpoint or DEFAULT_WEIGHTS))
 
     # ----------------------------------------------------------------------------------------- stages
+    def _combination_bound(self, boxes: list[np.ndarray], views: list[FrameView]) -> float:
+        """An upper bound on the combinations the matcher will enumerate, from the pairwise-close box centres.
+
+        A combination is grown from its first box b in later views only, each view adding nothing or one box
+        close to b; so at most prod over later views v of (1 + boxes of v close to b) combinations start at b.
+        """
+        from detector.matching import box_centres_3d
+
+        centres, view = box_centres_3d(boxes, [v.depth for v in views], [v.camera for v in views])
+        dist = np.linalg.norm(centres[:, None] - centres[None, :], axis=-1)  # (N, N), NaN without depth
+        close = np.nan_to_num(dist, nan=np.inf) <= self.config.match_threshold_mm
+        per_view = close.astype(np.float64) @ np.eye(len(views))[view]  # (N, V) close boxes in each view
+        later = view[:, None] < np.arange(len(views))[None, :]  # (N, V)
+        return float(np.prod(np.where(later, 1 + per_view, 1), axis=1).sum())
+
     def _match(self, boxes: list[np.ndarray], views: list[FrameView]) -> list[list[int]]:
         """Group boxes across views by their 3D centres: per person, per view a box index or -1."""
         from detector.matching import match_boxes
 
+        bound = self._combination_bound(boxes, views)
+        if bound > self.config.max_match_combinations:
+            raise ValueError(
+                f"the boxes are too crowded to group across views (up to {bound:.3g} combinations of boxes "
+                f"within {self.config.match_threshold_mm:g} mm, more than "
+                f"{self.config.max_match_combinations}); give person_ids with the boxes, or fewer boxes"
+            )
         groups = match_boxes(
             boxes,
             [v.depth for v in views],

@@ -9,6 +9,8 @@ import pytest
 import torch
 from conftest import write_tiny_mvor
 
+from detector.matching import box_centres_3d, valid_combinations
+from posenet.cameras import Camera
 from posenet.data.mvor import MvorDataset
 from posenet.evaluate import evaluate
 from posenet.infer import PoseEstimator
@@ -67,3 +69,21 @@ def test_no_boxes_and_no_detector(setup):
     assert pipe.run(views, empty).persons == []
     with pytest.raises(ValueError, match="no detector"):
         pipe.run(views)
+
+
+def test_crowded_boxes_are_refused_before_matching_explodes(setup):
+    pipe, _, _ = setup
+    rng = np.random.default_rng(0)
+    cams = [Camera.create(500.0, 500.0, 320.0, 240.0) for _ in range(4)]
+    views = [FrameView(None, np.full((480, 640), 3000, np.uint16), c) for c in cams]
+    # The bound holds: it is never below the number of combinations the matcher really enumerates.
+    for _ in range(5):
+        corners = [np.sort(rng.uniform(0, 600, (int(rng.integers(0, 6)), 2, 2)), axis=1) for _ in cams]
+        boxes = [c.reshape(-1, 4) + [0, 0, 20, 20] for c in corners]  # (K, 4) with x1 > x0, y1 > y0
+        centres, view = box_centres_3d(boxes, [v.depth for v in views], cams)
+        enumerated = len(view) + sum(len(m) for m, _ in valid_combinations(centres, view, 750.0))
+        assert pipe._combination_bound(boxes, views) >= enumerated
+    # 4 views of 40 boxes at the same spot: 40^4 combinations would take gigabytes; refused at once instead.
+    same = [np.tile([[100.0, 100.0, 200.0, 300.0]], (40, 1))] * 4
+    with pytest.raises(ValueError, match="too crowded"):
+        pipe.run(views, same)
