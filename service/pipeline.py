@@ -43,6 +43,9 @@ class PipelineConfig:
     # views make that exponential (4 views x 64 identical boxes: 17 M combinations, gigabytes); 300 k take
     # about 2 s here.
     max_match_combinations: int = 300_000
+    # Persons per frame run through the pose network (its memory grows with persons x views x crop pixels).
+    # MVOR frames hold at most about 6; in detector mode the best-supported groups are kept, beyond it.
+    max_persons: int = 32
 
 
 @dataclass
@@ -204,6 +207,13 @@ class ScenePipeline:
             ids = list(range(len(groups)))
         else:
             ids, groups = [], []
+        if len(groups) > self.config.max_persons:
+            if scores[0] is None:
+                raise ValueError(
+                    f"the boxes make {len(groups)} persons, more than the limit of {self.config.max_persons}"
+                )
+            # Detector mode: the matcher lists multi-view groups first; the best-supported persons are kept.
+            ids, groups = ids[: self.config.max_persons], groups[: self.config.max_persons]
         timings["match"] = _ms(t0)
         persons = [
             PersonResult(

@@ -87,3 +87,12 @@ def test_crowded_boxes_are_refused_before_matching_explodes(setup):
     same = [np.tile([[100.0, 100.0, 200.0, 300.0]], (40, 1))] * 4
     with pytest.raises(ValueError, match="too crowded"):
         pipe.run(views, same)
+
+
+def test_too_many_reference_persons_are_refused(setup):
+    pipe, _, ds = setup
+    views = [FrameView(v.color, v.depth, v.camera) for v in ds[0].views]
+    boxes = [np.tile([[10.0, 10.0, 60.0, 90.0]], (33, 1))] + [np.zeros((0, 4))] * 2
+    ids = [np.arange(33), np.zeros(0, np.int64), np.zeros(0, np.int64)]
+    with pytest.raises(ValueError, match="33 persons, more than the limit of 32"):
+        pipe.run(views, boxes, ids)
