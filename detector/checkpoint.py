@@ -25,7 +25,7 @@ WEIGHTS, CONFIG, STATE = "model.safetensors", "config.json", "training_state.pt"
 def checkpoint_files(path: str | Path) -> tuple[Path, Path]:
     """The (weights, config) files of a checkpoint folder or ``.safetensors`` file."""
     path = Path(path)
-    if path.is_dir():
+    if path.is_dir() or (not path.exists() and path.suffix == ""):
         return path / WEIGHTS, path / CONFIG
     if path.suffix == ".safetensors":
         return path, path.with_suffix(".json")

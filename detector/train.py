@@ -120,6 +120,7 @@ def train(
         loader.generator.set_state(state["loader_rng"])
         print(f"resumed {out} at epoch {start_epoch} (step {step})")
     t0 = time.time()
+    deadline = None if cfg.max_minutes is None else t0 + cfg.max_minutes * 60
     train_dict = {**asdict(cfg), "train_images": len(train_set)}
     for epoch in range(start_epoch, cfg.epochs):
         model.train()
@@ -141,19 +142,25 @@ def train(
             for k, v in {"loss": output.loss, **output.loss_dict}.items():
                 sums[k] = sums.get(k, 0.0) + float(v.detach() if torch.is_tensor(v) else v)
             bar.set_postfix(loss=f"{sums['loss'] / seen:.3f}")
+            if deadline is not None and time.time() > deadline:
+                break  # checked every step: one epoch may take longer than the whole budget
+        out_of_time = deadline is not None and time.time() > deadline
+        # An epoch cut short is not counted as done: --resume repeats it (the schedule goes on from `step`).
+        done = epoch + 1 if seen == len(loader) else epoch
         entry = {"epoch": epoch + 1, "step": step, "minutes": round((time.time() - t0) / 60, 2)}
+        if done == epoch:
+            entry["partial"] = f"{seen}/{len(loader)} batches"
         entry.update({k: round(v / max(seen, 1), 4) for k, v in sums.items()})
-        out_of_time = cfg.max_minutes is not None and time.time() - t0 > cfg.max_minutes * 60
         last = epoch + 1 == cfg.epochs or out_of_time
         if eval_fn is not None and (last or (cfg.eval_every and (epoch + 1) % cfg.eval_every == 0)):
             entry.update(eval_fn(model))
         log.append(entry)
         print(json.dumps(entry))
-        save_checkpoint(out, model, det_cfg, train_dict, {"epoch": epoch + 1, "step": step, "metrics": entry})
+        save_checkpoint(out, model, det_cfg, train_dict, {"epoch": done, "step": step, "metrics": entry})
         torch.save(
             {
                 "optimizer": optimizer.state_dict(),
-                "epoch": epoch + 1,
+                "epoch": done,
                 "step": step,
                 "log": log,
                 "torch_rng": torch.get_rng_state(),
@@ -194,6 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--input", choices=["rgb", "depth", "rgbd"], help="input channels (default: rgb, the paper)"
     )
+    g.add_argument("--backbone", help="timm backbone name (e.g. resnet18, regnetx_002)")
     g.add_argument("--queries", type=int, help="number of DETR queries")
     g.add_argument("--input-width", type=int, help="images are resized to this width")
     g = p.add_argument_group("training (defaults come from the preset)")
@@ -270,6 +278,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             args.preset,
             pretrained=args.pretrained,
             input_mode=args.input,
+            backbone=args.backbone,
             num_queries=args.queries,
             input_width=args.input_width,
         )

@@ -58,6 +58,15 @@ def write_dataset(root, days=(1, 2), per_day=4, seed=0) -> str:
     return str(ann_path)
 
 
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    """Tiny models: thread overheads on a shared 2-core machine cost more than they give."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     root = tmp_path_factory.mktemp("tiny")
@@ -202,3 +211,38 @@ def test_coco_ap_perfect_and_shifted(dataset):
     assert coco_ap(records, shifted)["AP50"] == pytest.approx(0.0)
     assert evaluate_file(ann, perfect, days=[1])["AP75"] == pytest.approx(1.0)
     assert coco_ap(records, [])["AP"] == 0.0
+
+
+def test_depth_inputs_and_errors(dataset):
+    """A colour+depth detector reads 4 channels; a depth-only one needs depth; bad inputs raise clearly."""
+    root, ann = dataset
+    records = load_records(ann, [1])
+    for mode, channels in (("rgbd", 4), ("depth", 1)):
+        cfg = tiny_cpu_cfg(input_mode=mode)
+        torch.manual_seed(0)
+        detector = PersonDetector(build_detector(cfg), cfg)
+        x, labels, _ = DetectionDataset(records, root, cfg)[0]
+        assert x.shape == (channels, H, W) and labels["boxes"].shape[1] == 4
+        color = cv2.cvtColor(cv2.imread(str(root / records[0].file_name)), cv2.COLOR_BGR2RGB)
+        depth = cv2.imread(str(root / records[0].file_name.replace("color", "depth")), cv2.IMREAD_UNCHANGED)
+        det = detector.detect([color], [depth], score_threshold=0.0)[0]
+        assert det.boxes.shape == (cfg.num_queries, 4) and (np.diff(det.scores) <= 0).all()
+        assert (det.boxes[:, [0, 1]] >= -0.5).all() and (det.boxes[:, 2] <= W - 0.5).all()
+        with pytest.raises(ValueError, match="depth"):
+            detector.detect([color])
+    with pytest.raises(ValueError, match="input_mode"):
+        preset("cpu", input_mode="thermal")
+    with pytest.raises(ValueError, match="preset"):
+        preset("huge")
+
+
+def test_missing_checkpoint_says_how_to_get_one(tmp_path):
+    with pytest.raises(FileNotFoundError, match="not exist"):
+        PersonDetector.from_checkpoint(tmp_path / "nothing")
+    from detector.infer import DEFAULT_WEIGHTS
+
+    if DEFAULT_WEIGHTS.is_file():
+        assert PersonDetector.from_checkpoint().cfg.num_queries > 0
+    else:
+        with pytest.raises(FileNotFoundError, match="detector.train"):
+            PersonDetector.from_checkpoint()
