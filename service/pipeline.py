@@ -126,13 +126,15 @@ class ScenePipeline:
         config: PipelineConfig | None = None,
     ) -> ScenePipeline:
         """Load both models; ``None`` paths mean the weights shipped with the package."""
-        from detector.checkpoint import read_config
-        from detector.infer import DEFAULT_WEIGHTS, PersonDetector
         from posenet.infer import PoseEstimator
 
         pose = PoseEstimator.from_checkpoint(pose_checkpoint, device=device)
         if not load_detector:
             return cls(pose, None, config)
+        # Imported only when needed: transformers takes seconds to import.
+        from detector.checkpoint import read_config
+        from detector.infer import DEFAULT_WEIGHTS, PersonDetector
+
         detector = PersonDetector.from_checkpoint(detector_checkpoint, device=device)
         return cls(pose, detector, config, read_config(detector_checkpoint or DEFAULT_WEIGHTS))
 

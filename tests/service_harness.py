@@ -22,8 +22,10 @@ import torch
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
-def tiny_checkpoints(folder: Path, seed: int = 0) -> tuple[Path, Path]:
-    """A random-init pose network and a small random-init DETR, saved under ``folder``: (pose, detector)."""
+def tiny_checkpoints(folder: Path, seed: int = 0, detector: bool = True) -> tuple[Path, Path | None]:
+    """A random-init pose network and (if ``detector``) a small random-init DETR, saved under ``folder``.
+
+    Returns the (pose, detector or None) checkpoint paths."""
     from detector.checkpoint import save_checkpoint as save_detector
     from detector.model import build_detector, preset
     from posenet.checkpoint import save_checkpoint as save_pose
@@ -34,6 +36,8 @@ def tiny_checkpoints(folder: Path, seed: int = 0) -> tuple[Path, Path]:
     pose = save_pose(
         folder / "pose", PoseNet(pose_cfg), {"model": dataclasses.asdict(pose_cfg), "data": "random"}
     )
+    if not detector:
+        return pose, None
     det_cfg = preset("cpu", d_model=32, encoder_layers=1, decoder_layers=1, ffn_dim=64, num_queries=8)
     det = folder / "detector"
     save_detector(det, build_detector(det_cfg), det_cfg, train={"data": "random init (tests)"})

@@ -61,13 +61,9 @@ def client_cmd(data, url, out, *extra) -> list[str]:
 def test_client_resumes_after_being_killed(tmp_path):
     data = write_tiny_mvor(tmp_path / "tiny", days=(1, 2), frames_per_day=4)
     ids = [mv["id"] for mv in data.gt["multiview_images"]]
-    pose, det = tiny_checkpoints(tmp_path / "ckpt")
+    pose, _ = tiny_checkpoints(tmp_path / "ckpt", detector=False)  # reference boxes: no detector needed
     # One request in flight on the server and three from the client: the client must retry the 503s.
-    env = {
-        "ORPOSE_POSE_CHECKPOINT": str(pose),
-        "ORPOSE_DETECTOR_CHECKPOINT": str(det),
-        "ORPOSE_MAX_IN_FLIGHT": "1",
-    }
+    env = {"ORPOSE_POSE_CHECKPOINT": str(pose), "ORPOSE_LOAD_DETECTOR": "false", "ORPOSE_MAX_IN_FLIGHT": "1"}
     out = tmp_path / "results.jsonl"
     with Server(env) as url:
         cmd = client_cmd(data, url, out, "--reference-boxes", "--concurrency", "3")
