@@ -124,13 +124,14 @@ def main() -> None:
     p.add_argument("--repeats", type=int, default=5, help="timed runs per measurement (median)")
     p.add_argument("--presets", nargs="*", default=list(PRESETS), choices=list(PRESETS))
     p.add_argument("--settings", nargs="*", default=list(SETTINGS), choices=list(SETTINGS))
+    p.add_argument("--persons", type=int, nargs="*", default=[1, 3, 6], help="persons per inference scene")
     p.add_argument("--json", help="also write the rows to this json file")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
     rows = []
     for preset in args.presets:
         for setting in args.settings:
-            row = bench(preset, setting, args.repeats)
+            row = bench(preset, setting, args.repeats, tuple(args.persons))
             rows.append(row)
             print(json.dumps(row), flush=True)
     if args.json:
