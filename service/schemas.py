@@ -63,7 +63,7 @@ class ViewIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
-    camera: CameraIn
+    camera: CameraIn = Field(..., description="the calibration of this view's camera")
     depth_scale_mm: float = Field(
         1.0,
         gt=0,
@@ -153,8 +153,8 @@ class SceneOut(BaseModel):
         "OpenCV axes x right, y down, z forward); unit mm",
         description="the frame and unit of every 3D coordinate in this response",
     )
-    persons: list[Person]
-    timings: Timings
+    persons: list[Person] = Field(..., description="everyone found in the frame (empty when nobody is)")
+    timings: Timings = Field(..., description="server milliseconds per stage of this request")
 
 
 class ModelInfo(BaseModel):
@@ -172,7 +172,7 @@ class ModelInfo(BaseModel):
 
 
 class Health(BaseModel):
-    status: Literal["ok"] = "ok"
+    status: Literal["ok"] = Field("ok", description="always ok: the process is alive and answering")
 
 
 class Ready(BaseModel):

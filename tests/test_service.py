@@ -87,6 +87,13 @@ def test_health_ready_model_and_token(server):
     assert r.status_code == 401 and r.headers["www-authenticate"] == "Bearer"
     schema = server.get("/openapi.json").json()
     assert "in mm in the reference frame" in json.dumps(schema["components"]["schemas"]["Joint"])
+    undocumented = [
+        f"{name}.{prop}"
+        for name, model in schema["components"]["schemas"].items()
+        for prop, field in model.get("properties", {}).items()
+        if "description" not in field
+    ]
+    assert undocumented == [], "every field of the API says what it means"
 
 
 def test_reference_box_mode_gives_each_annotated_person(server, tiny):
