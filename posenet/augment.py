@@ -274,6 +274,11 @@ def unflip_channels(x: Tensor, flipped: Tensor) -> Tensor:
     perm = torch.tensor(FLIP_PERMUTATION, device=x.device)
     if x.shape[1] != len(FLIP_PERMUTATION):
         raise ValueError(f"expected {len(FLIP_PERMUTATION)} joint channels, got {x.shape[1]}")
-    swapped = x[:, perm]
-    mask = flipped.to(x.device).view(-1, *([1] * (x.ndim - 1)))
-    return torch.where(mask, swapped, x)
+    flipped = flipped.to(x.device)
+    if not bool(flipped.any()):
+        return x  # nothing mirrored (always at test time): no copy
+    # one gather with a per-sample channel order, instead of a full swapped copy plus a select
+    order = torch.where(
+        flipped.view(-1, 1), perm.view(1, -1), torch.arange(x.shape[1], device=x.device)
+    )  # (N, J)
+    return x.gather(1, order.view(*order.shape, *([1] * (x.ndim - 2))).expand_as(x))

@@ -133,3 +133,14 @@ def test_occluders_cover_one_rectangle_and_keep_the_mask():
         assert changed[n].sum() == area  # exactly one filled rectangle
         assert 0.01 * 20 * 24 <= area <= 0.41 * 0.41 * 20 * 24 + 25
     torch.testing.assert_close(aug.occluders(x, 0.0, g), x)
+
+
+def test_unflip_mixed_batch_matches_per_sample_permutation():
+    x = torch.randn(3, 10, 4, 5)
+    out = aug.unflip_channels(x, torch.tensor([True, False, True]))
+    torch.testing.assert_close(out[0], x[0, list(FLIP_PERMUTATION)])
+    torch.testing.assert_close(out[1], x[1])
+    torch.testing.assert_close(out[2], x[2, list(FLIP_PERMUTATION)])
+    torch.testing.assert_close(
+        aug.unflip_channels(out, torch.tensor([True, False, True])), x
+    )  # an involution
