@@ -158,7 +158,10 @@ def _sample_per_view(images: Tensor, A: Tensor, P: int, size: tuple[int, int], m
     )  # (V, h, P, w, 2)
     grid = aug._normalise(src.reshape(V, h, P * w, 2), (images.shape[-1], images.shape[-2]))
     out = torch.nn.functional.grid_sample(images, grid, mode=mode, padding_mode="zeros", align_corners=False)
-    return out.view(V, C, h, P, w).permute(3, 0, 1, 2, 4).reshape(P * V, C, h, w)  # (P*V, C, h, w)
+    # (with V or P = 1 reshape may return a strided view; later .view calls need contiguous memory)
+    return (
+        out.view(V, C, h, P, w).permute(3, 0, 1, 2, 4).reshape(P * V, C, h, w).contiguous()
+    )  # (P*V, C, h, w)
 
 
 def build_scene(
@@ -250,9 +253,9 @@ def build_scene(
 
     # ---- the points to lift
     if config.mode == "crop":
-        uv = src.view(P, V, h * w, 2)
-        d = d_net.view(P, V, h * w)
-        valid = mask.view(P, V, h * w) & (d > 0)
+        uv = src.reshape(P, V, h * w, 2)
+        d = d_net.reshape(P, V, h * w)
+        valid = mask.reshape(P, V, h * w) & (d > 0)
     else:
         uv = aug._grid(H, W, None, torch.float32).view(1, 1, H * W, 2).expand(1, V, H * W, 2)
         d = depth.view(1, V, H * W)

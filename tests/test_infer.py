@@ -109,3 +109,12 @@ def test_flip_averaging_averages_the_mirrored_pass(scene):
         mirrored = est.model(build_scene(views, box_t, has, est.model.config.inputs, mirror=True))
     assert not torch.allclose(mirrored.joints, plain.joints)
     torch.testing.assert_close(both.joints, (plain.joints + mirrored.joints) / 2, atol=1e-3, rtol=1e-5)
+
+
+@pytest.mark.parametrize("mode", ["crop", "full"])
+def test_a_single_view_works(scene, mode):
+    views, boxes = scene
+    pred = _estimator(mode).predict(views[:1], [[b[0]] for b in boxes])
+    assert pred.joints.shape == (3, 10, 3) and torch.isfinite(pred.joints).all()
+    # with one view every joint lies on the lifted surface seen by camera 0, in front of it
+    assert (pred.joints[..., 2] > 0).all()
