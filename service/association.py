@@ -13,6 +13,8 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from posenet.data.sample import Sample
+
 
 def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """IoU of every pair of xyxy boxes: ``a (N, 4)``, ``b (M, 4)`` -> ``(N, M)``."""
@@ -73,3 +75,17 @@ def assign(
         if score[r, c] > min_iou:
             out[r] = int(c)
     return out
+
+
+def ground_truth_ids(
+    sample: Sample, pred_boxes: Sequence[Sequence[Sequence[float] | None]]
+) -> list[int | None]:
+    """The ground-truth person id of each predicted person of ``sample`` (None where none overlaps enough).
+
+    Args:
+        sample: the annotated frame; its boxes with a person id (>= 0) are the ground-truth persons.
+        pred_boxes: P persons, each V entries: an xyxy box or None.
+    """
+    gt_ids = sorted({int(i) for view in sample.views for i in view.box_person_ids if i >= 0})
+    matches = assign(pred_boxes, [sample.person_boxes(pid) for pid in gt_ids])
+    return [None if g is None else gt_ids[g] for g in matches]

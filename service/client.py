@@ -159,7 +159,7 @@ def append_line(f, line: dict) -> None:
 # ----------------------------------------------------------------------------------------------- evaluation
 def predictions(lines: dict[str, dict], dataset: MvorDataset) -> list[dict]:
     """The output's persons in ``posenet.evaluate``'s format; detector-mode ids are associated by box IoU."""
-    from service.association import assign
+    from service.association import ground_truth_ids
 
     by_id = {sample_id: i for i, sample_id in enumerate(dataset.ids)}
     preds = []
@@ -170,13 +170,11 @@ def predictions(lines: dict[str, dict], dataset: MvorDataset) -> list[dict]:
         persons = response["persons"]
         if response["mode"] == "detector":
             sample = dataset[by_id[frame_id]]
-            gt_ids = sorted({int(i) for v in sample.views for i in v.box_person_ids if i >= 0})
-            gt_boxes = [sample.person_boxes(pid) for pid in gt_ids]
             pred_boxes = [[None] * len(sample.views) for _ in persons]
             for p, person in enumerate(persons):
                 for support in person["views"]:
                     pred_boxes[p][support["view"]] = support["box"]
-            ids = [None if g is None else gt_ids[g] for g in assign(pred_boxes, gt_boxes)]
+            ids = ground_truth_ids(sample, pred_boxes)
         else:
             ids = [p["id"] for p in persons]
         for person, pid in zip(persons, ids, strict=True):

@@ -22,6 +22,7 @@ import numpy as np
 
 from posenet.cameras import Camera
 from posenet.data.sample import Sample
+from service.association import ground_truth_ids
 
 
 class FrameView(NamedTuple):
@@ -245,8 +246,9 @@ class ScenePipeline:
         """Run on a dataset :class:`Sample`; also return its predictions in ``posenet.evaluate``'s format.
 
         With ``reference_boxes`` the sample's annotated boxes and person ids are used (the paper's ablation
-        setting), so each prediction carries the ground truth's person id. In detector mode the ids are the
-        scene's indices and ``posenet.evaluate`` has to associate them with the ground truth.
+        setting), so each prediction carries the ground truth's person id. In detector mode each person gets
+        the id of the annotated person whose boxes it overlaps most (``service.association``, the paper's
+        rule); persons that overlap nobody are left out of the predictions.
         """
         views = [FrameView(v.color, v.depth, v.camera) for v in sample.views]
         if reference_boxes:
@@ -255,10 +257,13 @@ class ScenePipeline:
                 views, [v.boxes[k] for v, k in zip(sample.views, keep, strict=True)],
                 [v.box_person_ids[k] for v, k in zip(sample.views, keep, strict=True)],
             )  # fmt: skip
+            ids = [p.id for p in result.persons]
         else:
             result = self.run(views)
+            ids = ground_truth_ids(sample, [p.boxes for p in result.persons])
         predictions = [
-            {"image_ids": sample.id, "person_id": p.id, "keypoints3D": p.joints.reshape(-1).tolist()}
-            for p in result.persons
+            {"image_ids": sample.id, "person_id": pid, "keypoints3D": p.joints.reshape(-1).tolist()}
+            for p, pid in zip(result.persons, ids, strict=True)
+            if pid is not None
         ]
         return result, predictions

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 import torch
 from conftest import write_tiny_mvor
+from service_harness import tiny_checkpoints
 
+from detector.infer import PersonDetector
 from detector.matching import box_centres_3d, valid_combinations
 from posenet.cameras import Camera
 from posenet.data.mvor import MvorDataset
@@ -96,3 +98,13 @@ def test_too_many_reference_persons_are_refused(setup):
     ids = [np.arange(33), np.zeros(0, np.int64), np.zeros(0, np.int64)]
     with pytest.raises(ValueError, match="33 persons, more than the limit of 32"):
         pipe.run(views, boxes, ids)
+
+
+def test_run_sample_in_detector_mode_associates_ids(tmp_path, setup):
+    pipe, data, ds = setup
+    _, det = tiny_checkpoints(tmp_path, detector=True)
+    with_detector = ScenePipeline(pipe.pose, PersonDetector.from_checkpoint(det))
+    result, preds = with_detector.run_sample(ds[0], reference_boxes=False)
+    assert result.mode == "detector" and result.timings["detect"] > 0
+    gt_ids = set(ds[0].person_ids.tolist())
+    assert {p["person_id"] for p in preds} <= gt_ids and len(preds) == len({p["person_id"] for p in preds})
