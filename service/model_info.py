@@ -11,14 +11,18 @@ from service.pipeline import ScenePipeline
 from service.schemas import ModelInfo
 
 # Config keys that say what a model saw in training, in the order they are reported.
-_DATA_KEYS = ("data", "dataset", "annotations", "days", "train_days", "holdout_day", "test_day", "subsample",
-              "epochs", "steps", "preset")  # fmt: skip
+_DATA_KEYS = (
+    "data", "dataset", "annotations", "days", "train_days", "holdout_day", "test_day",
+    "train_frames", "val_frames", "train_images", "subsample", "epochs", "steps", "preset",
+)  # fmt: skip
+# Where the training scripts put them: top level, or a section of the saved config.
+_SECTIONS = ("train", "data", "data_description")
 
 
 def summarise_training(config: dict) -> str:
     """A one-line account of the training data in a checkpoint config, from whichever known keys it holds."""
     found = {}
-    for section in (config, config.get("train") or {}, config.get("data") or {}):
+    for section in (config, *(config.get(name) for name in _SECTIONS)):
         if isinstance(section, dict):
             for key in _DATA_KEYS:
                 value = section.get(key)
