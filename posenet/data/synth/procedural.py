@@ -64,8 +64,8 @@ def procedural_frame(
         table_center=room_probe.table_center,
         table_yaw=room_probe.table_yaw,
         enclose=enclose,
+        table_size=room_probe.table_size,
     )
-    room.table_size = room_probe.table_size
     persons = []
     for pid, (pos, yaw, at_table) in enumerate(spots):
         posture = None

@@ -177,6 +177,7 @@ def sample_room(
     table_center: np.ndarray | None = None,
     table_yaw: float | None = None,
     enclose: np.ndarray | None = None,
+    table_size: tuple[float, float] | None = None,
 ) -> Room:
     """A random room around a table at the origin (or at ``table_center``).
 
@@ -189,7 +190,7 @@ def sample_room(
         else np.asarray(table_center, float)
     )
     yaw = rng.uniform(-0.1, 0.1) if table_yaw is None else float(table_yaw)
-    size = (rng.uniform(1900, 2150), rng.uniform(520, 600))
+    size = (rng.uniform(1900, 2150), rng.uniform(520, 600)) if table_size is None else table_size
     half = np.array([rng.uniform(3300, 4500), rng.uniform(3000, 4000), rng.uniform(1450, 1600)])
     if enclose is not None and len(enclose):
         need = np.abs(np.asarray(enclose, float)[:, :2] - tc[:2]).max(0) + 250
