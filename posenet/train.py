@@ -103,7 +103,6 @@ PRESETS: dict[str, dict] = {
         "epochs": 200,
         "scenes_per_step": 1,
         "decay_start": 1.0,
-        "cache": False,
         "model": {
             "inputs": {
                 "mode": "full",
@@ -232,6 +231,7 @@ def train(cfg: TrainConfig) -> dict:
     rank, world = setup_distributed(device)
     if device.startswith("cuda") and world > 1:
         device = f"cuda:{int(os.environ.get('LOCAL_RANK', rank))}"
+        torch.cuda.set_device(device)  # so that NCCL's collectives of each rank use its own GPU
     if cfg.threads:
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
