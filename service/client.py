@@ -208,7 +208,9 @@ def run(dataset: MvorDataset, root: Path, out: Path, cfg: ClientConfig) -> dict:
         for future in as_completed(futures):
             try:
                 line = future.result()
-            except (httpx.TransportError, RuntimeError) as exc:
+            except (httpx.TransportError, RuntimeError, OSError) as exc:
+                # Transient errors after all retries, or an unreadable image file: not written, so a rerun
+                # (after fixing the file) retries the frame.
                 counts["gave_up"] += 1
                 tqdm.write(f"{futures[future]}: gave up ({exc}); a rerun will retry it")
             else:

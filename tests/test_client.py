@@ -14,11 +14,11 @@ import time
 import numpy as np
 import pytest
 from conftest import write_tiny_mvor
-from service_harness import REPO_ROOT, Server, tiny_checkpoints
+from service_harness import REPO_ROOT, Server, free_port, tiny_checkpoints
 
 from posenet.data.mvor import MvorDataset
 from service.association import assign, mean_view_iou
-from service.client import append_line, predictions, read_done
+from service.client import ClientConfig, append_line, predictions, read_done, run
 
 
 def test_read_done_drops_a_torn_last_line_and_appends_cleanly(tmp_path):
@@ -111,3 +111,14 @@ def test_detector_mode_predictions_get_ground_truth_ids_by_iou(tiny_mvor_dataset
     preds = predictions(lines, ds)
     expected = [(pid, float(n)) for n, pid in enumerate(reversed(gt_ids))]
     assert [(p["person_id"], p["keypoints3D"][0]) for p in preds] == expected
+
+
+def test_unreachable_server_and_missing_files_are_failures_not_lines(tiny_mvor_dataset, tmp_path):
+    data = tiny_mvor_dataset
+    ds = MvorDataset(None, data.gt)
+    (data.root / ds[0].views[1].file_name).unlink()  # one frame cannot be read
+    out = tmp_path / "out.jsonl"
+    cfg = ClientConfig(url=f"http://127.0.0.1:{free_port()}", retries=0)  # nothing listens there
+    counts = run(ds, data.root, out, cfg)
+    assert counts["gave_up"] == len(ds) and counts["ok"] == counts["rejected"] == 0
+    assert read_done(out) == {}  # a later run retries every frame
