@@ -42,6 +42,9 @@ class InputConfig:
     image_size: tuple[int, int] = (320, 240)  # full mode: (W, H) the views are resized to (paper: MVOR / 2)
     train_crop: tuple[int, int] = (288, 208)  # full mode: (W, H) random training windows (paper)
     extra_depth: bool = True  # + relative depth and depth-valid channels (an extension; paper: False)
+    # crop mode: views are first resized to fit this (W, H), so that crops at inference come from images of
+    # the training data's resolution whatever the camera delivers; None crops from the views as given
+    source_size: tuple[int, int] | None = None
     depth_centre: float = 3000.0  # mm: depth normalisation (D - centre) / range
     depth_range: float = 2000.0
 
@@ -52,6 +55,7 @@ class InputConfig:
             raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
         self.image_size = tuple(self.image_size)
         self.train_crop = tuple(self.train_crop)
+        self.source_size = None if self.source_size is None else tuple(self.source_size)
 
     @property
     def in_channels(self) -> int:
@@ -101,21 +105,26 @@ class SceneInput:
 
 def resize_view(
     color: np.ndarray | None, depth: np.ndarray, camera: Camera, size: tuple[int, int]
-) -> tuple[np.ndarray | None, np.ndarray, Camera, float]:
-    """Resize one view to ``size (W, H)`` (same aspect): colour INTER_AREA, depth nearest (no blending of 0s).
+) -> tuple[np.ndarray | None, np.ndarray, Camera, tuple[float, float]]:
+    """Resize one view to fit inside ``size (W, H)``, keeping its aspect ratio (the network pads the rest).
 
-    Returns the new colour, depth, camera and the factor (new / old) to apply to boxes.
+    Colour with INTER_AREA, depth nearest (no blending of unknown 0s into known depths). The camera
+    follows exactly, per axis, with the rule u' = (u + 0.5) s - 0.5 of ``Camera.scale``. Returns the new
+    colour, depth, camera and the factors ``(sx, sy)`` to apply to boxes.
     """
     H, W = depth.shape
-    f = size[0] / W
-    if abs(size[1] / H - f) > 1e-6:
-        raise ValueError(f"cannot resize a {W}x{H} view to {size}: the aspect ratio differs")
-    if (W, H) == tuple(size):
-        return color, depth, camera, 1.0
+    f = min(size[0] / W, size[1] / H)
+    new = (max(1, round(W * f)), max(1, round(H * f)))
+    if new == (W, H):
+        return color, depth, camera, (1.0, 1.0)
+    sx, sy = new[0] / W, new[1] / H
     if color is not None:
-        color = cv2.resize(color, size, interpolation=cv2.INTER_AREA)
-    depth = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)
-    return color, depth, camera.scale(f), f
+        color = cv2.resize(color, new, interpolation=cv2.INTER_AREA)
+    depth = cv2.resize(depth, new, interpolation=cv2.INTER_NEAREST)
+    K = camera.intrinsics.clone()
+    K[..., 0], K[..., 2] = K[..., 0] * sx, (K[..., 2] + 0.5) * sx - 0.5
+    K[..., 1], K[..., 3] = K[..., 1] * sy, (K[..., 3] + 0.5) * sy - 0.5
+    return color, depth, Camera(K, camera.extrinsics, camera.distortion, new), (sx, sy)
 
 
 def _stack_views(
@@ -195,10 +204,13 @@ def build_scene(
         )
     if config.modality != "depth" and any(v[0] is None for v in views):
         raise ValueError(f"modality {config.modality!r} needs colour images, but a view has none")
-    if config.mode == "full":
-        resized = [resize_view(c, d, cam, config.image_size) for c, d, cam in views]
-        factors = torch.tensor([r[3] for r in resized], dtype=torch.float32)
-        boxes = (boxes + 0.5) * factors.view(1, V, 1) - 0.5  # pixel-centre convention, as Camera.scale
+    target = config.image_size if config.mode == "full" else config.source_size
+    if target is not None:
+        resized = [resize_view(c, d, cam, target) for c, d, cam in views]
+        factors = torch.tensor([r[3] for r in resized], dtype=torch.float32).repeat(
+            1, 2
+        )  # (V, 4): sx, sy, sx, sy
+        boxes = (boxes + 0.5) * factors.view(1, V, 4) - 0.5  # pixel-centre convention, as Camera.scale
         views = [r[:3] for r in resized]
     color, depth, cameras = _stack_views(views)
     H, W = depth.shape[-2:]

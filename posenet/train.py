@@ -89,7 +89,14 @@ PRESETS: dict[str, dict] = {
         "scenes_per_step": 4,
         "decay_start": 0.75,
         "model": {
-            "inputs": {"mode": "crop", "crop_size": 96, "crop_margin": 1.1, "extra_depth": True},
+            # crops come from 320x240 views (subsample 2), also at inference whatever the input size
+            "inputs": {
+                "mode": "crop",
+                "crop_size": 96,
+                "crop_margin": 1.1,
+                "extra_depth": True,
+                "source_size": (320, 240),
+            },
             "base": 16,
             "depth": 3,
             "bf16": True,

@@ -1,14 +1,16 @@
 import dataclasses
 
 import cv2
+import numpy as np
 import pytest
 import torch
 from tiny_scenes import write_dataset
 
+from posenet.cameras import Camera
 from posenet.checkpoint import DEFAULT_WEIGHTS, load_checkpoint, save_checkpoint
 from posenet.data.mvor import MvorDataset
 from posenet.infer import PoseEstimator
-from posenet.inputs import InputConfig, build_scene
+from posenet.inputs import InputConfig, build_scene, resize_view
 from posenet.model import ModelConfig, PoseNet
 
 
@@ -48,9 +50,11 @@ def test_batched_equals_per_person(scene, mode):
     assert together.has_points.all() and (together.confidence > 0).all()
 
 
-def test_any_image_size_keeps_the_cameras_right(scene):
+@pytest.mark.parametrize("mode", ["full", "crop"])
+def test_any_image_size_keeps_the_cameras_right(scene, mode):
     views, boxes = scene
-    est = _estimator("full")
+    est = _estimator(mode)
+    est.model.config.inputs.source_size = (80, 60)  # crop mode: crop from views of the training resolution
     big = []
     for color, depth, cam in views:  # the same scene at twice the resolution
         up = [cv2.resize(img, (160, 120), interpolation=cv2.INTER_NEAREST) for img in (color, depth)]
@@ -118,3 +122,14 @@ def test_a_single_view_works(scene, mode):
     assert pred.joints.shape == (3, 10, 3) and torch.isfinite(pred.joints).all()
     # with one view every joint lies on the lifted surface seen by camera 0, in front of it
     assert (pred.joints[..., 2] > 0).all()
+
+
+def test_resize_view_keeps_projections_for_any_aspect():
+    cam = Camera.create(90.0, 88.0, 49.5, 29.0, size=(100, 60))
+    depth = np.full((60, 100), 2000, np.uint16)
+    color = np.zeros((60, 100, 3), np.uint8)
+    _, d2, cam2, (sx, sy) = resize_view(color, depth, cam, (80, 60))
+    assert d2.shape == (48, 80) and cam2.size == (80, 48) and (sx, sy) == (0.8, 0.8)
+    pts = torch.tensor([[100.0, -50.0, 2000.0], [-300.0, 200.0, 3500.0]], dtype=torch.float64)
+    uv, uv2 = cam.project(pts), cam2.project(pts)
+    torch.testing.assert_close(uv2, (uv + 0.5) * 0.8 - 0.5)
