@@ -80,50 +80,11 @@ class TrainConfig:
         return TrainConfig(**d)
 
 
-# What each preset sets; anything given on the command line overrides it.
+# The presets live in posenet/configs/NAME.json; anything given on the command line overrides them.
+PRESET_DIR = Path(__file__).parent / "configs"
 PRESETS: dict[str, dict] = {
-    # Person crops: 96x96 crops of 1.1x the box; the crop is one more invertible affine (posenet.inputs).
-    "cpu": {
-        "subsample": 2,
-        "epochs": 60,
-        "scenes_per_step": 4,
-        "decay_start": 0.75,
-        "model": {
-            # crops come from 320x240 views (subsample 2), also at inference whatever the input size
-            "inputs": {
-                "mode": "crop",
-                "crop_size": 96,
-                "crop_margin": 1.1,
-                "extra_depth": True,
-                "source_size": (320, 240),
-            },
-            "base": 16,
-            "depth": 3,
-            "bf16": True,
-            "channels_last": True,
-        },
-        "augment": {"flip": True, "rotate_deg": 15.0, "crop": True, "color": True},
-    },
-    # The paper: full 320x240 images, random 288x208 crops, batch 1 scene, Adam 1e-3, 200 epochs, no decay.
-    "paper": {
-        "subsample": 2,
-        "epochs": 200,
-        "scenes_per_step": 1,
-        "decay_start": 1.0,
-        "model": {
-            "inputs": {
-                "mode": "full",
-                "image_size": (320, 240),
-                "train_crop": (288, 208),
-                "extra_depth": False,
-            },
-            "base": 64,  # the original U-Net's width (the paper does not state its own)
-            "depth": 4,
-            "bf16": False,
-            "channels_last": True,
-        },
-        "augment": {"flip": True, "rotate_deg": 15.0, "crop": True, "color": True},
-    },
+    f.stem: {k: v for k, v in json.loads(f.read_text()).items() if k != "description"}
+    for f in sorted(PRESET_DIR.glob("*.json"))
 }
 
 
@@ -131,7 +92,7 @@ def resolve_config(args: argparse.Namespace) -> TrainConfig:
     """Preset defaults, overridden by every command-line option that was given."""
     if args.preset not in PRESETS:
         raise ValueError(f"unknown preset {args.preset!r}; choose from {sorted(PRESETS)}")
-    preset = json.loads(json.dumps(PRESETS[args.preset]))  # deep copy
+    preset = json.loads(json.dumps(PRESETS[args.preset]))  # a deep copy
     inputs = preset["model"].pop("inputs")
     for key in ("modality", "crop_size", "extra_depth"):
         if getattr(args, key) is not None:
@@ -405,7 +366,8 @@ def build_parser() -> argparse.ArgumentParser:
         default="cpu",
         choices=sorted(PRESETS),
         help="cpu (default): 96x96 person crops, U-Net base 16, bf16, 4 scenes per step, cosine decay; "
-        "paper: full 320x240 images, 288x208 random crops, batch 1 scene, 200 epochs",
+        "paper: full 320x240 images, 288x208 random crops, batch 1 scene, 200 epochs "
+        "(posenet/configs/NAME.json)",
     )
     g.add_argument("--modality", choices=("rgbd", "rgb", "depth"), help="network input (paper: rgbd)")
     g.add_argument(
