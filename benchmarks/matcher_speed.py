@@ -1,11 +1,12 @@
 """Cross-view matcher speed: microseconds per scene against the number of boxes.
 
-    nice python benchmarks/matcher_speed.py [--views 3 4] [--people 1 2 4 6 8 10] [--repeats 50]
+    nice python benchmarks/matcher_speed.py [--views 3 4] [--people 1 2 4 6 8 10] [--min-seen 0.5]
 
 Scenes: P people on a grid 0.9 m apart, seen by V ceiling-mounted cameras on a ring (the hand-made scenes of
-``tests/test_matching.py``, raised 1.5 m). A box is drawn where at least half of it shows its person. Prints
-one JSON line per (V, P): the median microseconds of ``match_boxes`` (robust depth, lifting, enumeration,
-greedy choice), and how many persons came out as exactly one group holding all their boxes.
+``tests/test_matching.py``, raised 1.5 m). A box is drawn where at least half of it shows its person
+(``--min-seen 0``: all P x V boxes, the most combinations). Prints one JSON line per (V, P): the median
+microseconds of ``match_boxes`` (robust depth, lifting, enumeration, greedy choice), and how many persons
+came out as exactly one group holding all their boxes.
 """
 
 from __future__ import annotations
@@ -39,6 +40,12 @@ def main(argv: list[str] | None = None) -> list[dict]:
     p.add_argument("--views", type=int, nargs="+", default=[3, 4])
     p.add_argument("--people", type=int, nargs="+", default=[1, 2, 4, 6, 8, 10])
     p.add_argument("--repeats", type=int, default=50)
+    p.add_argument(
+        "--min-seen",
+        type=float,
+        default=0.5,
+        help="draw a box where this fraction shows its person (0: all P x V)",
+    )
     args = p.parse_args(argv)
     rng = np.random.default_rng(0)
     rows = []
@@ -46,7 +53,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         cams = ring_cameras(V, radius=5000.0, height=1500.0)  # ceiling-mounted, as in an OR
         for P in args.people:
             people = people_grid(P, rng, centre_z=5000.0)
-            views = render(cams, people, min_seen=0.5)
+            views = render(cams, people, min_seen=args.min_seen)
             boxes, depths = [b for b, _, _ in views], [d for _, d, _ in views]
             groups = match_boxes(boxes, depths, cams)  # warm-up
             times = []
