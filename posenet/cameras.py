@@ -139,8 +139,10 @@ class Camera:
             raise ValueError("cannot stack an empty list of cameras")
         dists = [c.distortion for c in cameras]
         if any(d is None for d in dists) and not all(d is None for d in dists):
-            dists = [torch.zeros_like(c.intrinsics[..., :1].expand(5)) if d is None else d
-                     for c, d in zip(cameras, dists, strict=True)]
+            dists = [
+                torch.zeros_like(c.intrinsics[..., :1].expand(5)) if d is None else d
+                for c, d in zip(cameras, dists, strict=True)
+            ]
         D = None if all(d is None for d in dists) else torch.stack(dists)
         sizes = {c.size for c in cameras}
         return Camera(
@@ -157,7 +159,10 @@ class Camera:
     def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> Camera:
         D = None if self.distortion is None else self.distortion.to(device=device, dtype=dtype)
         return Camera(
-            self.intrinsics.to(device=device, dtype=dtype), self.extrinsics.to(device=device, dtype=dtype), D, self.size
+            self.intrinsics.to(device=device, dtype=dtype),
+            self.extrinsics.to(device=device, dtype=dtype),
+            D,
+            self.size,
         )
 
     # ----------------------------------------------------------------- properties
@@ -254,7 +259,9 @@ class Camera:
         return torch.stack([x, y], dim=-1)
 
     @staticmethod
-    def _newton_step(x: Tensor, y: Tensor, xd: Tensor, yd: Tensor, distortion: Tensor) -> tuple[Tensor, Tensor]:
+    def _newton_step(
+        x: Tensor, y: Tensor, xd: Tensor, yd: Tensor, distortion: Tensor
+    ) -> tuple[Tensor, Tensor]:
         """One Newton step towards distort(x, y) = (xd, yd), normalised coordinates ``(*P, N)``."""
         d = distortion.unsqueeze(-2)  # (*B, 1, 5)
         k1, k2, p1, p2, k3 = (d[..., i] for i in range(5))
@@ -277,7 +284,9 @@ class Camera:
         ``(D (u - cx) / fx, D (v - cy) / fy, D)``, followed by T(v->ref).
         """
         if depth.shape != uv.shape[:-1]:
-            raise ValueError(f"depth must have shape {tuple(uv.shape[:-1])} to match uv, got {tuple(depth.shape)}")
+            raise ValueError(
+                f"depth must have shape {tuple(uv.shape[:-1])} to match uv, got {tuple(depth.shape)}"
+            )
         xy = self.normalised(uv)
         points_cam = torch.cat([xy * depth.unsqueeze(-1), depth.unsqueeze(-1)], dim=-1)
         return points_cam, self.to_ref(points_cam)
@@ -304,6 +313,8 @@ class Camera:
 def pixel_grid(height: int, width: int, device=None, dtype=torch.float32) -> Tensor:
     """``(H, W, 2)`` pixel coordinates (u, v) of every pixel centre, in this module's convention."""
     v, u = torch.meshgrid(
-        torch.arange(height, device=device, dtype=dtype), torch.arange(width, device=device, dtype=dtype), indexing="ij"
+        torch.arange(height, device=device, dtype=dtype),
+        torch.arange(width, device=device, dtype=dtype),
+        indexing="ij",
     )
     return torch.stack([u, v], dim=-1)

@@ -48,6 +48,9 @@ class TrainConfig:
     data: str
     out: str
     annotations: str | None = None  # default: DATA/annotations.json
+    # More datasets (MVOR layout, each with its own annotations.json) whose every day is used for training, e.g.
+    # procedural scenes beside the MVOR twin. The held-out day only ever refers to --data.
+    extra_data: list[str] = field(default_factory=list)
     holdout_day: int | None = (
         None  # the fold's test day (validation); None trains on every day, no validation
     )
@@ -220,6 +223,16 @@ def train(cfg: TrainConfig) -> dict:
         frames = frames[: cfg.max_frames]
     if not frames:
         raise ValueError(f"no training frame with an annotated, boxed pose in days {train_days}")
+    train_parts = [torch.utils.data.Subset(CachedFrames(train_set) if cfg.cache else train_set, frames)]
+    extra_frames = 0
+    for root in cfg.extra_data:
+        extra_ann = load_annotations(Path(root) / "annotations.json")
+        extra_set = MvorDataset(root, extra_ann, cfg.subsample, modalities)
+        extra = trainable_frames(extra_ann, cfg.subsample, None)
+        train_parts.append(
+            torch.utils.data.Subset(CachedFrames(extra_set) if cfg.cache else extra_set, extra)
+        )
+        extra_frames += len(extra)
     val_set = None
     if cfg.holdout_day is not None:
         val_set = MvorDataset(cfg.data, annotations, cfg.subsample, modalities, days=[cfg.holdout_day])
@@ -228,12 +241,13 @@ def train(cfg: TrainConfig) -> dict:
         "train_days": train_days,
         "holdout_day": cfg.holdout_day,
         "train_frames": len(frames),
+        "extra_data": list(cfg.extra_data),
+        "extra_train_frames": extra_frames,
         "val_frames": 0 if val_set is None else len(val_set),
     }
     if cfg.cache and cfg.num_workers:
         raise ValueError("--cache keeps frames in this process: use it with --num-workers 0")
-    source = CachedFrames(train_set) if cfg.cache else train_set
-    subset = torch.utils.data.Subset(source, frames)
+    subset = torch.utils.data.ConcatDataset(train_parts)
     sampler = torch.utils.data.distributed.DistributedSampler(
         subset, num_replicas=world, rank=rank, shuffle=True, seed=cfg.seed, drop_last=False
     )
@@ -348,6 +362,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--data", required=True, help="dataset root (MVOR layout: dayD/camC/{color,depth}/NNNNNN.png)"
     )
     g.add_argument("--annotations", help="MVOR-format annotation json (default: DATA/annotations.json)")
+    g.add_argument(
+        "--extra-data",
+        nargs="+",
+        metavar="DIR",
+        help="more MVOR-layout datasets (DIR/annotations.json) used whole for training, e.g. procedural scenes",
+    )
     g.add_argument(
         "--holdout-day", type=int, help="the fold's held-out day, used for validation (default: none)"
     )
