@@ -12,17 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-FULL_JOINTS: tuple[str, ...] = (
-    "head",
-    "neck",
-    "left_shoulder",
-    "right_shoulder",
-    "left_hip",
-    "right_hip",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
+from posenet.skeleton import JOINTS
+
+# MVOR's 10 joints, then its two hand points, then the legs that MVOR does not annotate.
+FULL_JOINTS: tuple[str, ...] = JOINTS + (
     "left_hand",
     "right_hand",
     "left_knee",

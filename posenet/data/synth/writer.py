@@ -33,26 +33,17 @@ from posenet.data.synth.rig import Rig, random_rig
 from posenet.data.synth.scene import Frame, render_frame
 from posenet.data.synth.skeleton_full import NUM_MVOR_POINTS
 from posenet.data.synth.twin import TwinContext, load_twin, twin_frame
+from posenet.skeleton import BONES, JOINTS
 
 VERSION = "1.0"
 MODE_CODES = {"procedural": 1, "twin": 2}
+# MVOR's category block, 1-based bones as in the real file.
 CATEGORIES = [
     {
-        "skeleton": [[1, 2], [2, 4], [4, 8], [4, 6], [8, 10], [2, 3], [3, 5], [3, 7], [7, 9], [5, 6]],
+        "skeleton": [[a + 1, b + 1] for a, b in BONES],
         "name": "person",
         "id": "1",
-        "keypoints": [
-            "head",
-            "neck",
-            "left_shoulder",
-            "right_shoulder",
-            "left_hip",
-            "right_hip",
-            "left_elbow",
-            "right_elbow",
-            "left_wrist",
-            "right_wrist",
-        ],
+        "keypoints": list(JOINTS),
         "supercategory": "person",
     }
 ]
