@@ -48,7 +48,11 @@ class TrainConfig:
     seed: int = 0
     max_minutes: float | None = None  # stop (after saving) when this much wall time has passed
     eval_every: int = 1  # evaluate the held-out day every this many epochs (0: only at the end)
-    augment: AugmentConfig = field(default_factory=lambda: AugmentConfig(scale_min=1.0, scale_max=1.0))
+    augment: AugmentConfig = field(  # flips only: the paper names no augmentation for its detector
+        default_factory=lambda: AugmentConfig(
+            scale_min=1.0, scale_max=1.0, brightness=0.0, contrast=0.0, saturation=0.0, depth_noise_mm=0.0
+        )
+    )
 
 
 TRAIN_PRESETS: dict[str, TrainConfig] = {
