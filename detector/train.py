@@ -125,6 +125,21 @@ def train(
         print(f"resumed {out} at epoch {start_epoch} (step {step})")
     t0 = time.time()
     deadline = None if cfg.max_minutes is None else t0 + cfg.max_minutes * 60
+
+    def save(entry: dict, done: int, step: int) -> None:
+        """Weights + configs (``config.json``) and the state that ``--resume`` needs."""
+        save_checkpoint(out, model, det_cfg, train_dict, {"epoch": done, "step": step, "metrics": entry})
+        state = {
+            "optimizer": optimizer.state_dict(),
+            "epoch": done,
+            "step": step,
+            "log": [*log, entry],
+            "torch_rng": torch.get_rng_state(),
+            "data_rng": train_set.rng,
+            "loader_rng": loader.generator.get_state(),
+        }
+        torch.save(state, out / STATE)
+
     train_dict = {**asdict(cfg), "train_images": len(train_set)}
     for epoch in range(start_epoch, cfg.epochs):
         model.train()
@@ -156,23 +171,13 @@ def train(
             entry["partial"] = f"{seen}/{len(loader)} batches"
         entry.update({k: round(v / max(seen, 1), 4) for k, v in sums.items()})
         last = epoch + 1 == cfg.epochs or out_of_time
+
+        save(entry, done, step)  # before the evaluation: a run killed while evaluating keeps its training
         if eval_fn is not None and (last or (cfg.eval_every and (epoch + 1) % cfg.eval_every == 0)):
             entry.update(eval_fn(model))
+            save(entry, done, step)  # again, with the metrics in config.json
         log.append(entry)
         print(json.dumps(entry))
-        save_checkpoint(out, model, det_cfg, train_dict, {"epoch": done, "step": step, "metrics": entry})
-        torch.save(
-            {
-                "optimizer": optimizer.state_dict(),
-                "epoch": done,
-                "step": step,
-                "log": log,
-                "torch_rng": torch.get_rng_state(),
-                "data_rng": train_set.rng,
-                "loader_rng": loader.generator.get_state(),
-            },
-            out / STATE,
-        )
         with open(out / "log.jsonl", "a") as f:
             f.write(json.dumps(entry) + "\n")
         if out_of_time:
