@@ -13,6 +13,7 @@ Offline use::
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -123,13 +124,27 @@ class ScenePipeline:
         pose_checkpoint: str | Path | None = None,
         detector_checkpoint: str | Path | None = None,
         device: str = "cpu",
-        load_detector: bool = True,
+        load_detector: bool | None = True,
         config: PipelineConfig | None = None,
     ) -> ScenePipeline:
-        """Load both models; ``None`` paths mean the weights shipped with the package."""
+        """Load both models; ``None`` paths mean the weights shipped with the package.
+
+        ``load_detector=None`` loads the detector only when ``detector_checkpoint`` is given or shipped detector
+        weights exist, and otherwise serves reference-box mode only (with a warning in the log).
+        """
         from posenet.infer import PoseEstimator
 
         pose = PoseEstimator.from_checkpoint(pose_checkpoint, device=device)
+        if load_detector is None:
+            from detector.infer import DEFAULT_WEIGHTS
+
+            load_detector = detector_checkpoint is not None or DEFAULT_WEIGHTS.is_file()
+            if not load_detector:
+                logging.getLogger(__name__).warning(
+                    "no detector weights at %s and ORPOSE_DETECTOR_CHECKPOINT unset: serving reference-box mode "
+                    "only (requests must carry boxes)",
+                    DEFAULT_WEIGHTS,
+                )
         if not load_detector:
             return cls(pose, None, config)
         # Imported only when needed: transformers takes seconds to import.

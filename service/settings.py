@@ -41,7 +41,13 @@ class Settings(BaseSettings):
     token: SecretStr | None = Field(
         None, description="bearer token; when set every route but /health needs it"
     )
-    load_detector: bool = Field(True, description="load the detector (False: reference-box mode only)")
+    # Unset: load the detector when a checkpoint is given or shipped weights exist; otherwise serve reference-box
+    # mode only (detector-mode requests then get a 422 that says so) rather than refusing to start.
+    load_detector: bool | None = Field(
+        None,
+        description="load the detector: true = required, false = reference-box mode only, "
+        "unset = load it when its weights exist",
+    )
 
     @field_validator("token", mode="before")
     @classmethod

@@ -108,3 +108,15 @@ def test_run_sample_in_detector_mode_associates_ids(tmp_path, setup):
     assert result.mode == "detector" and result.timings["detect"] > 0
     gt_ids = set(ds[0].person_ids.tolist())
     assert {p["person_id"] for p in preds} <= gt_ids and len(preds) == len({p["person_id"] for p in preds})
+
+
+def test_detector_loads_only_when_its_weights_exist(tmp_path, monkeypatch):
+    # load_detector=None (the service's default): no detector weights -> reference-box mode, not a failed start.
+    import detector.infer
+
+    pose, det = tiny_checkpoints(tmp_path)
+    monkeypatch.setattr(detector.infer, "DEFAULT_WEIGHTS", tmp_path / "absent" / "default.safetensors")
+    assert ScenePipeline.from_checkpoints(pose, None, load_detector=None).detector is None
+    assert ScenePipeline.from_checkpoints(pose, det, load_detector=None).detector is not None
+    with pytest.raises(FileNotFoundError):
+        ScenePipeline.from_checkpoints(pose, None, load_detector=True)
