@@ -307,11 +307,11 @@ def persons_of_sample(sample, which: str = "annotated") -> ScenePersons:
     elif which == "boxed":
         ids = sorted({int(i) for v in sample.views for i in v.box_person_ids if i >= 0})
         index = {int(pid): k for k, pid in enumerate(sample.person_ids)}
-        poses = np.stack(
-            [sample.poses[index[i]] if i in index else np.zeros((J, 3), np.float32) for i in ids]
-        )
-        valid = np.stack([sample.valid[index[i]] if i in index else np.zeros(J, bool) for i in ids])
-        poses, valid = poses.reshape(len(ids), J, 3), valid.reshape(len(ids), J)
+        # Persons without a 3D pose (or frames with no identified person at all) get zeros and False.
+        poses, valid = np.zeros((len(ids), J, 3), np.float32), np.zeros((len(ids), J), bool)
+        for p, i in enumerate(ids):
+            if i in index:
+                poses[p], valid[p] = sample.poses[index[i]], sample.valid[index[i]]
     else:
         raise ValueError(f"which must be 'annotated' or 'boxed', got {which!r}")
     boxes = np.zeros((len(ids), len(views), 4), np.float32)

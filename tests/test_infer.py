@@ -133,3 +133,14 @@ def test_resize_view_keeps_projections_for_any_aspect():
     pts = torch.tensor([[100.0, -50.0, 2000.0], [-300.0, 200.0, 3500.0]], dtype=torch.float64)
     uv, uv2 = cam.project(pts), cam2.project(pts)
     torch.testing.assert_close(uv2, (uv + 0.5) * 0.8 - 0.5)
+
+
+def test_boxed_persons_of_a_frame_without_identified_boxes(tmp_path):
+    # A frame whose boxes all have person_id -1 (MVOR's box-only persons) has no one to predict, and no error.
+    from posenet.inputs import persons_of_sample
+
+    sample = MvorDataset(tmp_path, write_dataset(tmp_path, {1: 1}, persons=2, seed=2))[0]
+    for view in sample.views:
+        view.box_person_ids = np.full_like(view.box_person_ids, -1)
+    persons = persons_of_sample(sample, "boxed")
+    assert persons.person_ids.numel() == 0 and persons.poses.shape == (0, 10, 3)
