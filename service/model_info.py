@@ -12,8 +12,8 @@ from service.schemas import ModelInfo
 
 # Config keys that say what a model saw in training, in the order they are reported.
 _DATA_KEYS = (
-    "data", "dataset", "annotations", "days", "train_days", "holdout_day", "test_day",
-    "train_frames", "val_frames", "train_images", "subsample", "epochs", "steps", "preset",
+    "trained_on", "data", "extra_data", "dataset", "annotations", "days", "train_days", "holdout_day", "test_day",
+    "train_frames", "extra_train_frames", "val_frames", "train_images", "subsample", "epochs", "steps", "preset",
 )  # fmt: skip
 # Where the training scripts put them: top level, or a section of the saved config.
 _SECTIONS = ("train", "data", "data_description")

@@ -189,7 +189,9 @@ async def post_scene(request: Request, pipeline: PipelineDep, settings: Settings
     scene = await anyio.to_thread.run_sync(decode)
     decode_ms = (time.perf_counter() - t_start) * 1e3
     if scene.boxes is None and pipeline.detector is None:
-        raise InputError("this server runs without a detector (ORPOSE_LOAD_DETECTOR=0): send reference boxes")
+        raise InputError(
+            'this server runs without a detector (no detector weights loaded, or ORPOSE_LOAD_DETECTOR=false): send reference boxes (per view "boxes", optionally "person_ids")'
+        )
 
     def infer() -> SceneResult:
         try:

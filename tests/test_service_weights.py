@@ -17,8 +17,8 @@ from detector.infer import DEFAULT_WEIGHTS as DETECTOR_WEIGHTS
 from posenet.checkpoint import DEFAULT_WEIGHTS as POSE_WEIGHTS
 
 FRAME = REPO_ROOT / "examples" / "frame"
-# One MVOR-twin frame; the CPU reference model reaches about 7 cm on held-out twin frames.
-MAX_MPJPE_MM = 150.0
+# A held-out (day-4) MVOR-twin frame; the shipped weights are about 4 cm off on it and 6.8 cm on all of day 4.
+MAX_MPJPE_MM = 100.0
 
 pytestmark = pytest.mark.skipif(
     not POSE_WEIGHTS.is_file(), reason=f"no shipped pose weights at {POSE_WEIGHTS} yet"
