@@ -108,7 +108,8 @@ def resize_view(
 ) -> tuple[np.ndarray | None, np.ndarray, Camera, tuple[float, float]]:
     """Resize one view to fit inside ``size (W, H)``, keeping its aspect ratio (the network pads the rest).
 
-    Colour with INTER_AREA, depth nearest (no blending of unknown 0s into known depths). The camera
+    An integer subsampling uses the MVOR reader's functions (colour block mean, depth lower median of the valid
+    pixels); other sizes use colour INTER_AREA, depth nearest (no blending of unknown 0s into known depths). The camera
     follows exactly, per axis, with the rule u' = (u + 0.5) s - 0.5 of ``Camera.scale``. Returns the new
     colour, depth, camera and the factors ``(sx, sy)`` to apply to boxes.
     """
@@ -118,9 +119,18 @@ def resize_view(
     if new == (W, H):
         return color, depth, camera, (1.0, 1.0)
     sx, sy = new[0] / W, new[1] / H
-    if color is not None:
-        color = cv2.resize(color, new, interpolation=cv2.INTER_AREA)
-    depth = cv2.resize(depth, new, interpolation=cv2.INTER_NEAREST)
+    k = W // new[0]
+    if W == k * new[0] and H == k * new[1]:
+        # An integer subsampling (640x480 -> 320x240): the reader's own functions, so that a frame served over
+        # HTTP at full resolution meets the network exactly as it did in training and offline evaluation.
+        from posenet.data.images import subsample_color, subsample_depth
+
+        color = None if color is None else subsample_color(color, k)
+        depth = subsample_depth(depth, k)
+    else:
+        if color is not None:
+            color = cv2.resize(color, new, interpolation=cv2.INTER_AREA)
+        depth = cv2.resize(depth, new, interpolation=cv2.INTER_NEAREST)
     K = camera.intrinsics.clone()
     K[..., 0], K[..., 2] = K[..., 0] * sx, (K[..., 2] + 0.5) * sx - 0.5
     K[..., 1], K[..., 3] = K[..., 1] * sy, (K[..., 3] + 0.5) * sy - 0.5
