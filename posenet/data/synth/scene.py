@@ -108,9 +108,9 @@ def _material_tables(prims: list[Primitive]) -> tuple[np.ndarray, ...]:
     return albedo, dropout, texture, specular, owner
 
 
-def unoccluded_pixels(prims_cam: list[Primitive], owner: int, K: Intrinsics, factor: int = 4) -> int:
-    """Pixels that person ``owner`` would cover with nothing in front, counted at 1/factor resolution."""
-    small = Intrinsics(
+def _downscaled(K: Intrinsics, factor: int) -> Intrinsics:
+    """The intrinsics of the image subsampled by ``factor`` (pixel centres stay centres, as posenet.cameras)."""
+    return Intrinsics(
         K.fx / factor,
         K.fy / factor,
         (K.cx + 0.5) / factor - 0.5,
@@ -118,6 +118,11 @@ def unoccluded_pixels(prims_cam: list[Primitive], owner: int, K: Intrinsics, fac
         K.width // factor,
         K.height // factor,
     )
+
+
+def unoccluded_pixels(prims_cam: list[Primitive], owner: int, K: Intrinsics, factor: int = 4) -> int:
+    """Pixels that person ``owner`` would cover with nothing in front, counted at 1/factor resolution."""
+    small = _downscaled(K, factor)
     g = rasterize([p for p in prims_cam if p.owner == owner], small)
     return int((g.prim >= 0).sum()) * factor * factor
 
@@ -130,14 +135,7 @@ def silhouettes(
     T = rig.world_to_cam()
     out = {}
     for v, K in enumerate(rig.intrinsics):
-        small = Intrinsics(
-            K.fx / factor,
-            K.fy / factor,
-            (K.cx + 0.5) / factor - 0.5,
-            (K.cy + 0.5) / factor - 0.5,
-            K.width // factor,
-            K.height // factor,
-        )
+        small = _downscaled(K, factor)
         for i in range(len(frame.persons)):
             g = rasterize([p.to_camera(T[v]) for p in prims if p.owner == i], small)
             hit = g.prim >= 0
