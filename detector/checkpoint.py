@@ -15,7 +15,7 @@ from pathlib import Path
 
 import torch
 from safetensors.torch import load_file, save_file
-from transformers import DetrConfig, DetrForObjectDetection
+from transformers import ConditionalDetrConfig, DetrConfig, DetrForObjectDetection
 
 from detector.model import DetectorConfig, from_detr_config
 
@@ -81,7 +81,8 @@ def load_checkpoint(
     cfg = replace(cfg, pretrained=None)
     detr = dict(meta["detr"])
     detr.pop("transformers_version", None)
-    model = from_detr_config(DetrConfig.from_dict(detr), cfg)
+    config_class = ConditionalDetrConfig if detr.get("model_type") == "conditional_detr" else DetrConfig
+    model = from_detr_config(config_class.from_dict(detr), cfg)
     missing, unexpected = model.load_state_dict(load_file(str(weights)), strict=False)
     if missing or unexpected:
         raise ValueError(

@@ -35,6 +35,8 @@ class ImageRecord:
         width, height: full image size in pixels.
         boxes: (K, 4) float32 xyxy pixels of the full-size image.
         color, depth: the images themselves, when held in memory instead of read from ``root``.
+        root: the dataset root of this record, when it differs from the one its reader was given (training
+            on several datasets at once, ``--extra-data``).
     """
 
     image_id: int
@@ -45,6 +47,7 @@ class ImageRecord:
     boxes: np.ndarray
     color: np.ndarray | None = None
     depth: np.ndarray | None = None
+    root: str | None = None
 
 
 def load_annotation_file(annotations: str | Path | dict) -> dict:
@@ -106,6 +109,7 @@ def read_record(
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The full-size colour ``(H, W, 3)`` uint8 RGB and/or depth ``(H, W)`` uint16 of a record."""
     size = (record.width, record.height)
+    root = record.root if record.root is not None else root
     c = d = None
     if color:
         c = record.color if record.color is not None else read_color(Path(root) / record.file_name, size)
@@ -119,7 +123,8 @@ def read_record(
 class DetectionDataset(Dataset):
     """Views as DETR training examples.
 
-    Item: ``(pixel_values (C, H, W), labels, image_id)``; ``labels`` is DETR's dict of ``class_labels (K,)``
+    With ``cache``, resized views are kept in memory after their first read (one process: ``num_workers``
+    0). Item: ``(pixel_values (C, H, W), labels, image_id)``; ``labels`` is DETR's dict of ``class_labels (K,)``
     (all 0, "person") and ``boxes (K, 4)`` normalised (cx, cy, w, h) of the item's own (unpadded) size.
     """
 
@@ -130,21 +135,29 @@ class DetectionDataset(Dataset):
         cfg: DetectorConfig,
         augment: AugmentConfig | None = None,
         seed: int = 0,
+        cache: bool = False,
     ) -> None:
         self.records, self.root, self.cfg, self.augment = records, root, cfg, augment
         self.rng = np.random.default_rng(seed)
+        self.cache = cache
+        self._cache: dict[int, tuple] = {}
 
     def __len__(self) -> int:
         return len(self.records)
 
     def __getitem__(self, index: int) -> tuple[torch.Tensor, dict, int]:
         rec = self.records[index]
-        use_color = self.cfg.input_mode in ("rgb", "rgbd")
-        use_depth = self.cfg.input_mode in ("depth", "rgbd")
-        color, depth = read_record(rec, self.root, use_color, use_depth)
-        factor = resize_factor(rec.width, self.cfg)
-        color, depth = resize_view(color, depth, factor)
-        boxes = scale_xyxy(rec.boxes, factor)
+        if index in self._cache:
+            color, depth, boxes = self._cache[index]
+        else:
+            use_color = self.cfg.input_mode in ("rgb", "rgbd")
+            use_depth = self.cfg.input_mode in ("depth", "rgbd")
+            color, depth = read_record(rec, self.root, use_color, use_depth)
+            factor = resize_factor(rec.width, self.cfg)
+            color, depth = resize_view(color, depth, factor)
+            boxes = scale_xyxy(rec.boxes, factor)
+            if self.cache:  # the resized view, before augmentation (a 160x120 RGB view is 58 kB)
+                self._cache[index] = (color, depth, boxes)
         if self.augment is not None:
             color, depth, boxes = augment_view(color, depth, boxes, self.augment, self.rng)
         x = normalise(color, depth, self.cfg)  # (C, H, W)

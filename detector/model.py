@@ -23,9 +23,22 @@ from dataclasses import dataclass, field, replace
 
 import torch
 from torch import nn
-from transformers import DetrConfig, DetrForObjectDetection
+from transformers import (
+    ConditionalDetrConfig,
+    ConditionalDetrForObjectDetection,
+    DetrConfig,
+    DetrForObjectDetection,
+)
 
 INPUT_CHANNELS = {"rgb": 3, "depth": 1, "rgbd": 4}
+# The transformers classes of each ``arch``: DETR (the paper's) and Conditional DETR (Meng et al. 2021: the
+# same backbone, encoder and set loss, but queries that predict a reference point and a focal class loss; it
+# converges several times faster from scratch, see docs/detector.md).
+ARCHS = {
+    "detr": (DetrConfig, DetrForObjectDetection),
+    "conditional_detr": (ConditionalDetrConfig, ConditionalDetrForObjectDetection),
+}
+MODEL_TYPES = {"detr": "detr", "conditional_detr": "conditional_detr"}  # arch -> config.model_type
 
 
 @dataclass
@@ -33,6 +46,7 @@ class DetectorConfig:
     """Architecture and preprocessing of a detector. Training hyper-parameters live in ``detector.train``."""
 
     preset: str = "cpu"
+    arch: str = "detr"  # "detr" (the paper's) or "conditional_detr" (ARCHS)
     backbone: str = (
         "resnet18"  # a timm model name (timm builds offline; transformers' own ResNet calls the hub)
     )
@@ -64,6 +78,8 @@ class DetectorConfig:
     extra: dict = field(default_factory=dict)  # free-form notes saved with the config
 
     def __post_init__(self) -> None:
+        if self.arch not in ARCHS:
+            raise ValueError(f"arch must be one of {sorted(ARCHS)}, got {self.arch!r}")
         if self.input_mode not in INPUT_CHANNELS:
             raise ValueError(f"input_mode must be one of {sorted(INPUT_CHANNELS)}, got {self.input_mode!r}")
         if not 1 <= self.backbone_stage <= 4:
@@ -104,8 +120,8 @@ def preset(name: str, **overrides) -> DetectorConfig:
     return replace(PRESETS[name], **{k: v for k, v in overrides.items() if v is not None})
 
 
-def detr_config(cfg: DetectorConfig) -> DetrConfig:
-    """The transformers ``DetrConfig`` of ``cfg`` (offline: a timm backbone with random weights)."""
+def detr_config(cfg: DetectorConfig) -> DetrConfig | ConditionalDetrConfig:
+    """The transformers config of ``cfg`` (offline: a timm backbone with random weights)."""
     backbone = {
         "model_type": "timm_backbone",
         "backbone": cfg.backbone,
@@ -116,7 +132,9 @@ def detr_config(cfg: DetectorConfig) -> DetrConfig:
     }
     if cfg.dilation:
         backbone["output_stride"] = 16
-    return DetrConfig(
+    config_class = ARCHS[cfg.arch][0]
+    extra = {"eos_coefficient": cfg.eos_coefficient} if cfg.arch == "detr" else {}
+    return config_class(
         backbone_config=backbone,
         num_channels=cfg.num_channels,
         num_labels=1,
@@ -132,8 +150,8 @@ def detr_config(cfg: DetectorConfig) -> DetrConfig:
         decoder_ffn_dim=cfg.ffn_dim,
         dropout=cfg.dropout,
         auxiliary_loss=cfg.auxiliary_loss,
-        eos_coefficient=cfg.eos_coefficient,
         dilation=cfg.dilation,
+        **extra,
     )
 
 
@@ -141,7 +159,7 @@ def _unfreeze_norm(module: nn.Module) -> None:
     """Replace DETR's frozen batch norms under ``module`` by trainable ``nn.BatchNorm2d`` with the same
     values."""
     for name, child in module.named_children():
-        if type(child).__name__ == "DetrFrozenBatchNorm2d":
+        if type(child).__name__.endswith("FrozenBatchNorm2d"):
             bn = nn.BatchNorm2d(child.weight.numel())
             with torch.no_grad():
                 bn.weight.copy_(child.weight)
@@ -168,9 +186,19 @@ def set_trainable(model: DetrForObjectDetection, cfg: DetectorConfig) -> None:
                 p.requires_grad_(False)
 
 
-def from_detr_config(config: DetrConfig, cfg: DetectorConfig) -> DetrForObjectDetection:
+def model_class(config) -> type:
+    """The transformers model class of a DETR-family config (by its ``model_type``)."""
+    for arch, model_type in MODEL_TYPES.items():
+        if config.model_type == model_type:
+            return ARCHS[arch][1]
+    raise ValueError(
+        f"unsupported detector model_type {config.model_type!r}; expected one of {sorted(MODEL_TYPES.values())}"
+    )
+
+
+def from_detr_config(config, cfg: DetectorConfig) -> DetrForObjectDetection:
     """A randomly initialised model of ``config``, with ``cfg``'s norm and freezing choices applied."""
-    model = DetrForObjectDetection(config)
+    model = model_class(config)(config)
     if cfg.trainable_norm:
         _unfreeze_norm(model.model.backbone.model)
     set_trainable(model, cfg)
@@ -186,7 +214,7 @@ def build_detector(cfg: DetectorConfig) -> DetrForObjectDetection:
     """
     if cfg.pretrained is None:
         return from_detr_config(detr_config(cfg), cfg)
-    model = DetrForObjectDetection.from_pretrained(
+    model = ARCHS[cfg.arch][1].from_pretrained(
         cfg.pretrained,
         num_labels=1,
         id2label={0: "person"},

@@ -28,6 +28,7 @@ from tqdm import tqdm
 from detector.augment import AugmentConfig
 from detector.checkpoint import STATE, load_checkpoint, read_config, save_checkpoint
 from detector.data import DetectionDataset, collate, load_annotation_file, load_records, worker_init
+from detector.dense import DenseLoss
 from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
 from detector.model import DetectorConfig, build_detector, param_groups, preset
@@ -48,6 +49,9 @@ class TrainConfig:
     seed: int = 0
     max_minutes: float | None = None  # stop (after saving) when this much wall time has passed
     eval_every: int = 1  # evaluate the held-out day every this many epochs (0: only at the end)
+    # Weight of the training-only dense loss on the encoder tokens (detector.dense; 0: off, as in the paper)
+    dense_weight: float = 0.0
+    cache: bool = False  # keep resized training views in memory (one process)
     augment: AugmentConfig = field(  # flips only: the paper names no augmentation for its detector
         default_factory=lambda: AugmentConfig(
             scale_min=1.0, scale_max=1.0, brightness=0.0, contrast=0.0, saturation=0.0, depth_noise_mm=0.0
@@ -111,6 +115,13 @@ def train(
         generator=torch.Generator().manual_seed(cfg.seed),
     )
     groups = param_groups(model, cfg.lr, cfg.backbone_lr, cfg.weight_decay)
+    dense = None
+    if cfg.dense_weight > 0:
+        dense = DenseLoss(model.config.d_model)
+        dense.attach(model)
+        groups.append(
+            {"params": list(dense.parameters()), "lr": cfg.lr, "weight_decay": 0.0, "name": "dense"}
+        )
     base_lrs = [g["lr"] for g in groups]
     optimizer = torch.optim.AdamW(groups, lr=cfg.lr, weight_decay=cfg.weight_decay)
     total = cfg.epochs * len(loader)
@@ -119,6 +130,8 @@ def train(
         state = torch.load(out / STATE, weights_only=False)
         optimizer.load_state_dict(state["optimizer"])
         start_epoch, step, log = state["epoch"], state["step"], state["log"]
+        if dense is not None and state.get("dense") is not None:
+            dense.load_state_dict(state["dense"])
         torch.set_rng_state(state["torch_rng"])
         train_set.rng = state["data_rng"]
         loader.generator.set_state(state["loader_rng"])
@@ -137,6 +150,7 @@ def train(
             "torch_rng": torch.get_rng_state(),
             "data_rng": train_set.rng,
             "loader_rng": loader.generator.get_state(),
+            "dense": None if dense is None else dense.state_dict(),
         }
         torch.save(state, out / STATE)
 
@@ -151,14 +165,19 @@ def train(
             output = model(
                 pixel_values=batch["pixel_values"], pixel_mask=batch["pixel_mask"], labels=batch["labels"]
             )
+            loss, parts = output.loss, dict(output.loss_dict)
+            if dense is not None:
+                extra = dense(output.encoder_last_hidden_state, batch["pixel_mask"], batch["labels"])
+                loss = loss + cfg.dense_weight * extra["loss_dense"]
+                parts.update(extra)
             optimizer.zero_grad(set_to_none=True)
-            output.loss.backward()
+            loss.backward()
             if cfg.grad_clip:
                 torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
             optimizer.step()
             step += 1
             seen += 1
-            for k, v in {"loss": output.loss, **output.loss_dict}.items():
+            for k, v in {"loss": loss, **parts}.items():
                 sums[k] = sums.get(k, 0.0) + float(v.detach() if torch.is_tensor(v) else v)
             bar.set_postfix(loss=f"{sums['loss'] / seen:.3f}")
             if deadline is not None and time.time() > deadline:
@@ -200,6 +219,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--train-days", type=int, nargs="+", help="days to train on (default: all but the held-out)"
     )
     g.add_argument(
+        "--extra-data",
+        nargs="+",
+        default=[],
+        metavar="DIR",
+        help="more MVOR-layout datasets (DIR/annotations.json), used whole for training (e.g. procedural scenes)",
+    )
+    g.add_argument(
         "--max-images", type=int, help="use only the first N training views (quick runs and tests)"
     )
     g = p.add_argument_group("model")
@@ -209,6 +235,11 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--pretrained", help="local folder (or hub id) of real DETR weights to fine-tune")
     g.add_argument(
         "--input", choices=["rgb", "depth", "rgbd"], help="input channels (default: rgb, the paper)"
+    )
+    g.add_argument(
+        "--arch",
+        choices=["detr", "conditional_detr"],
+        help="detr (the paper's) or conditional_detr (faster from scratch; docs/detector.md)",
     )
     g.add_argument("--backbone", help="timm backbone name (e.g. resnet18, regnetx_002)")
     g.add_argument("--queries", type=int, help="number of DETR queries")
@@ -223,6 +254,14 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--warmup-steps", type=int)
     g.add_argument("--num-workers", type=int)
     g.add_argument("--seed", type=int)
+    g.add_argument(
+        "--dense-weight",
+        type=float,
+        help="weight of the training-only dense loss on the encoder tokens (detector/dense.py; 0 turns it off)",
+    )
+    g.add_argument(
+        "--cache", action=argparse.BooleanOptionalAction, help="keep resized training views in memory"
+    )
     g.add_argument("--max-minutes", type=float, help="stop (after saving a checkpoint) after this wall time")
     g.add_argument(
         "--eval-every", type=int, help="evaluate the held-out day every N epochs (0: only at the end)"
@@ -263,6 +302,8 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 "seed": args.seed,
                 "max_minutes": args.max_minutes,
                 "eval_every": args.eval_every,
+                "dense_weight": args.dense_weight,
+                "cache": args.cache,
             }.items()
             if v is not None
         },
@@ -278,6 +319,11 @@ def main(argv: list[str] | None = None) -> list[dict]:
     else:
         raise ValueError("give --holdout-day (the fold) or --train-days")
     records = load_records(annotations, train_days)[: args.max_images]
+    for extra in args.extra_data:
+        extra_records = load_records(Path(extra) / "annotations.json")
+        for r in extra_records:
+            r.root = str(extra)
+        records += extra_records
 
     if args.resume and (out / "config.json").is_file():
         model, det_cfg, _ = load_checkpoint(out)
@@ -287,13 +333,20 @@ def main(argv: list[str] | None = None) -> list[dict]:
             args.preset,
             pretrained=args.pretrained,
             input_mode=args.input,
+            arch=args.arch,
             backbone=args.backbone,
             num_queries=args.queries,
             input_width=args.input_width,
         )
+        det_cfg.extra["trained_on"] = {
+            "data": str(args.data),
+            "days": train_days,
+            "extra_data": [str(e) for e in args.extra_data],
+            "views": len(records),
+        }
         torch.manual_seed(cfg.seed)
         model = build_detector(det_cfg)
-    train_set = DetectionDataset(records, args.data, det_cfg, cfg.augment, seed=cfg.seed)
+    train_set = DetectionDataset(records, args.data, det_cfg, cfg.augment, seed=cfg.seed, cache=cfg.cache)
 
     eval_fn = None
     if args.holdout_day is not None:
