@@ -58,7 +58,7 @@ def coco_ap(records: list[ImageRecord], results: list[dict]) -> dict:
     }
     if not results:
         # pycocotools cannot load an empty result list; nothing detected is AP 0.
-        return {"AP": 0.0, "AP50": 0.0, "AP75": 0.0, **metrics}
+        return {"AP": 0.0, "AP50": 0.0, "AP75": 0.0, "F1_50": 0.0, "F1_50_threshold": 1.0, **metrics}
     with contextlib.redirect_stdout(io.StringIO()):  # pycocotools prints its progress
         gt = COCO()
         gt.dataset = coco_ground_truth(records)
@@ -68,7 +68,35 @@ def coco_ap(records: list[ImageRecord], results: list[dict]) -> dict:
         ev.evaluate()
         ev.accumulate()
         ev.summarize()
-    return {"AP": float(ev.stats[0]), "AP50": float(ev.stats[1]), "AP75": float(ev.stats[2]), **metrics}
+    f1, threshold, precision, recall = best_f1(ev)
+    return {
+        "AP": float(ev.stats[0]),
+        "AP50": float(ev.stats[1]),
+        "AP75": float(ev.stats[2]),
+        "F1_50": f1,
+        "F1_50_threshold": threshold,
+        "F1_50_precision": precision,
+        "F1_50_recall": recall,
+        **metrics,
+    }
+
+
+def best_f1(ev: COCOeval) -> tuple[float, float, float, float]:
+    """The best F1 at IoU 0.5 on COCOeval's recall grid, and the score threshold, precision and recall there.
+
+    Read from ``ev.eval`` (IoU 0.5, all areas, 100 detections): at each recall level COCO stores the
+    interpolated precision and the score of the detection that reaches it. The threshold is what a service
+    should keep boxes above; choose it on training data, not on the held-out day.
+    """
+    precision = ev.eval["precision"][0, :, 0, 0, -1]  # (R,) over ev.params.recThrs
+    scores = ev.eval["scores"][0, :, 0, 0, -1]
+    recall = ev.params.recThrs
+    valid = precision > 0
+    if not valid.any():
+        return 0.0, 1.0, 0.0, 0.0
+    f1 = np.where(valid, 2 * precision * recall / np.maximum(precision + recall, 1e-12), 0.0)
+    i = int(np.argmax(f1))
+    return float(f1[i]), float(scores[i]), float(precision[i]), float(recall[i])
 
 
 def evaluate_file(annotations: str | Path | dict, predictions: str | Path | list, days=None) -> dict:

@@ -109,14 +109,15 @@ class PersonDetector:
         self,
         images: Sequence[np.ndarray | None],
         depths: Sequence[np.ndarray | None] | None = None,
-        score_threshold: float = 0.5,
+        score_threshold: float | None = None,
     ) -> list[Detections]:
         """Person boxes in each view.
 
         Args:
             images: V colour images ``(H, W, 3)`` uint8 RGB (None allowed for a depth-only detector).
             depths: V depth images ``(H, W)`` uint16 mm, or None; needed by ``depth``/``rgbd`` detectors.
-            score_threshold: the lowest person probability kept.
+            score_threshold: the lowest person probability kept (default: the checkpoint's
+                ``score_threshold``, chosen on training data).
         """
         if depths is None:
             if self.needs_depth:
@@ -132,6 +133,8 @@ class PersonDetector:
             if ref is None:
                 raise ValueError(f"view {i} has neither a colour nor a depth image")
             full_sizes.append((ref.shape[1], ref.shape[0]))
+        if score_threshold is None:
+            score_threshold = self.cfg.score_threshold
         pixels, mask, factors, sizes = prepare_views(images, depths, self.cfg)
         with torch.inference_mode():
             out = self.model(pixel_values=pixels.to(self.device), pixel_mask=mask.to(self.device))

@@ -68,6 +68,9 @@ class DetectorConfig:
     # Images are resized to this width (aspect kept). 160 (MVOR's 640x480 -> 160x120) for ``cpu``: at equal
     # wall time on 2 cores it reached a lower loss than 320x240 with a lighter backbone (docs/detector.md).
     input_width: int = 160
+    # Boxes scoring below this are dropped at inference (PersonDetector.detect's default). Choose it on training
+    # data: ``detector.evaluate`` reports the F1-best threshold (F1_50_threshold).
+    score_threshold: float = 0.5
     pretrained: str | None = None  # local folder or hub id of real DETR weights (``paper``)
     freeze_stem: bool = False  # freeze stem + layer1 (the original DETR's choice for a pretrained backbone)
     # Normalisation of the inputs: ImageNet statistics for colour, metres around 2.5 m for depth.

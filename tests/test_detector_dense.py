@@ -151,3 +151,42 @@ def test_conditional_detr_trains_saves_and_reloads(dataset, tmp_path):
     for x, y in zip(a, b, strict=True):
         np.testing.assert_array_equal(x.boxes, y.boxes)
         assert (x.scores >= 0).all() and (x.scores <= 1).all() and len(x.scores) == 6  # sigmoid scores
+
+
+def test_export_sets_the_threshold_and_halves_the_file(dataset, tmp_path):
+    import numpy as np
+
+    from detector import export as export_cli
+    from detector.checkpoint import read_config
+    from detector.infer import PersonDetector
+
+    root, ann = dataset
+    run = tmp_path / "run"
+    train_cli.main(
+        [
+            "--data", str(root), "--annotations", ann, "--holdout-day", "2", "--input-width", str(W),
+            "--queries", "6", "--epochs", "1", "--batch-size", "2", "--no-progress", "--out", str(run),
+        ]
+    )  # fmt: skip
+    out = tmp_path / "ship" / "default.safetensors"
+    export_cli.main(
+        [
+            str(run), "--out", str(out), "--data", str(root), "--annotations", ann, "--threshold-days", "1",
+            "--half", "--trained-on", "tiny ellipses",
+        ]
+    )  # fmt: skip
+    meta = read_config(out)
+    chosen = meta["detector"]["extra"]["threshold_chosen_on"]
+    assert chosen["days"] == [1] and meta["trained_on"] == "tiny ellipses"
+    assert meta["detector"]["score_threshold"] == chosen["F1_50_threshold"]
+    assert out.stat().st_size < 0.6 * (run / "model.safetensors").stat().st_size  # float16
+    full, half = PersonDetector.from_checkpoint(run), PersonDetector.from_checkpoint(out)
+    assert half.cfg.score_threshold == chosen["F1_50_threshold"]
+    records = load_records(ann, [2])
+    import cv2
+
+    images = [cv2.cvtColor(cv2.imread(str(root / r.file_name)), cv2.COLOR_BGR2RGB) for r in records]
+    for a, b in zip(
+        full.detect(images, score_threshold=0.0), half.detect(images, score_threshold=0.0), strict=True
+    ):
+        np.testing.assert_allclose(a.boxes, b.boxes, atol=0.5)  # pixels; float16 weights

@@ -211,6 +211,12 @@ def test_coco_ap_perfect_and_shifted(dataset):
     assert coco_ap(records, shifted)["AP50"] == pytest.approx(0.0)
     assert evaluate_file(ann, perfect, days=[1])["AP75"] == pytest.approx(1.0)
     assert coco_ap(records, [])["AP"] == 0.0
+    # F1 at IoU 0.5 and its threshold: true boxes score 0.9, one false box per image scores 0.4 -> the best
+    # threshold keeps the true boxes only (F1 1), and it lies above the false boxes' score.
+    false = [dict(p, bbox=[0.0, 0.0, 5.0, 5.0], score=0.4) for p in perfect[: len(records)]]
+    m = coco_ap(records, [dict(p, score=0.9) for p in perfect] + false)
+    assert m["F1_50"] == pytest.approx(1.0) and m["F1_50_threshold"] > 0.4
+    assert m["F1_50_precision"] == pytest.approx(1.0) and m["F1_50_recall"] == pytest.approx(1.0)
 
 
 def test_depth_inputs_and_errors(dataset):

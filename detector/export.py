@@ -1,0 +1,116 @@
+"""Export a trained detector as a single-file checkpoint (``NAME.safetensors`` + ``NAME.json``), e.g. the
+shipped default weights.
+
+    python -m detector.export RUN --out detector/weights/default.safetensors \
+        --data data/mvor_twin --annotations data/mvor_twin/annotations.json --threshold-days 1 2 3 \
+        --trained-on "what the weights saw"
+
+With ``--threshold-days``, the score threshold that the service applies (``DetectorConfig.score_threshold``)
+is set to the F1-best threshold at IoU 0.5 on those days' views (``detector.evaluate``): choose training
+days, never the held-out one. ``--half`` stores the weights as float16 (half the size; they are cast back
+to float32 on loading).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from safetensors.torch import save_file
+
+from detector.checkpoint import checkpoint_files, load_checkpoint, save_checkpoint
+from detector.data import load_records
+from detector.evaluate import coco_ap
+from detector.infer import PersonDetector
+from detector.predict import predict_records
+
+
+def choose_threshold(
+    detector: PersonDetector, data: str, annotations: str, days: list[int], max_views: int, seed: int = 0
+) -> dict:
+    """COCO metrics, with the F1-best score threshold, of ``detector`` on (a seeded sample of) ``days``."""
+    records = load_records(annotations, days)
+    if max_views and len(records) > max_views:
+        pick = np.random.default_rng(seed).choice(len(records), max_views, replace=False)
+        records = [records[i] for i in sorted(pick)]
+    return coco_ap(records, predict_records(detector, records, data, progress=True))
+
+
+def export(
+    run: str | Path,
+    out: str | Path,
+    threshold: float | None = None,
+    half: bool = False,
+    trained_on: str | None = None,
+    threshold_metrics: dict | None = None,
+) -> Path:
+    """Write ``run``'s weights and config to ``out`` (a ``.safetensors`` path or a folder)."""
+    model, cfg, meta = load_checkpoint(run)
+    if threshold is not None:
+        cfg = replace(cfg, score_threshold=float(threshold))
+    extra = dict(cfg.extra)
+    if trained_on:
+        extra["trained_on_text"] = trained_on
+    if threshold_metrics is not None:
+        extra["threshold_chosen_on"] = threshold_metrics
+    cfg = replace(cfg, extra=extra)
+    weights = save_checkpoint(out, model, cfg, meta.get("train"), meta.get("progress"))
+    if half:
+        state = {
+            k: (v.half() if v.is_floating_point() else v).contiguous() for k, v in model.state_dict().items()
+        }
+        save_file(state, str(weights), metadata={"format": "pt", "dtype": "float16"})
+    if trained_on:
+        _, config = checkpoint_files(out)
+        data = json.loads(config.read_text())
+        config.write_text(json.dumps({"trained_on": trained_on, **data}, indent=2))
+    return weights
+
+
+def main(argv: list[str] | None = None) -> Path:
+    p = argparse.ArgumentParser(
+        prog="python -m detector.export",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument("checkpoint", help="run folder (or checkpoint) written by detector.train")
+    p.add_argument(
+        "--out", required=True, help="NAME.safetensors (NAME.json is written beside it) or a folder"
+    )
+    p.add_argument("--data", help="dataset root, for --threshold-days")
+    p.add_argument("--annotations", help="MVOR-format annotation json, for --threshold-days")
+    p.add_argument(
+        "--threshold-days", type=int, nargs="+", help="set the score threshold on these (training) days"
+    )
+    p.add_argument("--threshold-views", type=int, default=400, help="views sampled from those days (0: all)")
+    p.add_argument("--threshold", type=float, help="set this score threshold instead")
+    p.add_argument("--half", action="store_true", help="store float16 weights")
+    p.add_argument(
+        "--trained-on", help="a line saying what the weights were trained on (shown by GET /model)"
+    )
+    p.add_argument("--threads", type=int, help="torch CPU threads")
+    args = p.parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    threshold, metrics = args.threshold, None
+    if args.threshold_days:
+        if not (args.data and args.annotations):
+            p.error("--threshold-days needs --data and --annotations")
+        detector = PersonDetector.from_checkpoint(args.checkpoint)
+        metrics = choose_threshold(
+            detector, args.data, args.annotations, args.threshold_days, args.threshold_views
+        )
+        metrics["days"] = args.threshold_days
+        threshold = metrics["F1_50_threshold"]
+        print(json.dumps(metrics, indent=2))
+    weights = export(args.checkpoint, args.out, threshold, args.half, args.trained_on, metrics)
+    print(f"wrote {weights} ({weights.stat().st_size / 1e6:.1f} MB), score threshold {threshold}")
+    return weights
+
+
+if __name__ == "__main__":
+    main()
