@@ -8,6 +8,7 @@ parsing, body limits) stays in ``service/routes.py``; the pipeline receives only
 from __future__ import annotations
 
 from collections.abc import Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,6 +113,26 @@ def _boxes(
     return boxes, ids
 
 
+# OpenCV's decoders release the GIL: the images of a frame decode in parallel (3 views: ~2x faster on 2 cores).
+_DECODERS = ThreadPoolExecutor(max_workers=4, thread_name_prefix="decode")
+
+
+def _decode_all(scene: SceneIn, files: Mapping[str, bytes], limits: Limits) -> dict[str, Future]:
+    """Start decoding every view's colour and depth part; ``result()`` returns the image or raises its
+    InputError."""
+    jobs = {}
+    for i, view in enumerate(scene.views):
+        if f"depth_{i}" in files:
+            jobs[f"depth_{i}"] = _DECODERS.submit(
+                decode_depth, files[f"depth_{i}"], f"depth_{i}", view.depth_scale_mm, limits.max_image_pixels
+            )
+        if f"color_{i}" in files:
+            jobs[f"color_{i}"] = _DECODERS.submit(
+                decode_color, files[f"color_{i}"], f"color_{i}", limits.max_image_pixels
+            )
+    return jobs
+
+
 def validate_scene(
     scene: SceneIn, files: Mapping[str, bytes], limits: Limits, need_color: bool
 ) -> ValidatedScene:
@@ -136,15 +157,32 @@ def validate_scene(
     if not reference_mode and any(v.person_ids is not None for v in scene.views):
         raise InputError("person_ids were given without boxes")
     need_color = need_color or not reference_mode  # the detector reads colour
+    decoded = _decode_all(scene, files, limits)
+    try:
+        return _validated(scene, files, limits, need_color, reference_mode, decoded)
+    finally:
+        for job in decoded.values():
+            job.cancel()  # after an error: drop what has not started
+
+
+def _validated(
+    scene: SceneIn,
+    files: Mapping[str, bytes],
+    limits: Limits,
+    need_color: bool,
+    reference_mode: bool,
+    decoded: dict[str, Future],
+) -> ValidatedScene:
+    """The views in order, with the first error of the first view that has one (as a sequential check)."""
     views, all_boxes, all_ids = [], [], []
     for i, view in enumerate(scene.views):
         if f"depth_{i}" not in files:
             raise InputError(f"missing file part depth_{i}: every view needs a 16-bit depth PNG")
-        depth = decode_depth(files[f"depth_{i}"], f"depth_{i}", view.depth_scale_mm, limits.max_image_pixels)
+        depth = decoded[f"depth_{i}"].result()
         height, width = depth.shape
         color = None
         if f"color_{i}" in files:
-            color = decode_color(files[f"color_{i}"], f"color_{i}", limits.max_image_pixels)
+            color = decoded[f"color_{i}"].result()
             if color.shape[:2] != depth.shape:
                 raise InputError(
                     f"color_{i} is {color.shape[1]}x{color.shape[0]} but depth_{i} is {width}x{height}: "
