@@ -1,9 +1,10 @@
 """Detector speed: milliseconds per view of each preset, all views of a frame in one forward pass.
 
-    HF_HUB_OFFLINE=1 nice python benchmarks/detector_speed.py [--presets cpu paper] [--views 3] [--threads 2]
+    HF_HUB_OFFLINE=1 nice python benchmarks/detector_speed.py [--presets cpu cpu_detr_rgb paper] [--views 3] [--threads 2]
 
-Random weights (speed does not depend on them), 640x480 RGB views resized by each preset's own preprocessing,
-``PersonDetector.detect`` end to end (preprocessing, DETR, decoding). Prints one JSON line per preset.
+Random weights (speed does not depend on them), 640x480 RGB(-D) views resized by each variant's own
+preprocessing, ``PersonDetector.detect`` end to end (preprocessing, DETR, decoding). Prints one JSON line per
+variant: the presets ``cpu`` and ``paper`` and the variants in ``VARIANTS`` (a preset with overrides).
 """
 
 from __future__ import annotations
@@ -16,12 +17,18 @@ import numpy as np
 import torch
 
 from detector.infer import PersonDetector
-from detector.model import build_detector, preset
+from detector.model import PRESETS, build_detector, preset
+
+# Variants compared beside the presets: (preset, overrides).
+VARIANTS = {
+    "cpu_detr_rgb": ("cpu", {"arch": "detr", "input_mode": "rgb", "num_queries": 16}),
+    "cpu_conditional_rgbd": ("cpu", {"arch": "conditional_detr", "input_mode": "rgbd", "num_queries": 20}),
+}
 
 
 def main(argv: list[str] | None = None) -> list[dict]:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--presets", nargs="+", default=["cpu", "paper"], choices=["cpu", "paper"])
+    p.add_argument("--presets", nargs="+", default=["cpu", *VARIANTS, "paper"], choices=[*PRESETS, *VARIANTS])
     p.add_argument("--views", type=int, default=3, help="views per forward pass (one MVOR frame: 3)")
     p.add_argument("--repeats", type=int, default=5, help="timed passes (the median is reported)")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
@@ -30,24 +37,28 @@ def main(argv: list[str] | None = None) -> list[dict]:
     torch.set_num_threads(args.threads)
     rng = np.random.default_rng(0)
     views = [rng.integers(0, 255, (480, 640, 3), dtype=np.uint8) for _ in range(args.views)]
+    depths = [rng.integers(500, 6000, (480, 640), dtype=np.uint16) for _ in range(args.views)]
     rows = []
     for name in args.presets:
-        cfg = preset(name)
+        base, overrides = VARIANTS.get(name, (name, {}))
+        cfg = preset(base, **overrides)
         torch.manual_seed(0)
         detector = PersonDetector(build_detector(cfg), cfg, args.device)
-        detector.detect(views)  # warm-up (allocations, lazy init)
+        detector.detect(views, depths)  # warm-up (allocations, lazy init)
         times = []
         for _ in range(args.repeats):
             if args.device.startswith("cuda"):
                 torch.cuda.synchronize()
             t = time.perf_counter()
-            detector.detect(views)
+            detector.detect(views, depths)
             if args.device.startswith("cuda"):
                 torch.cuda.synchronize()
             times.append(time.perf_counter() - t)
         n_params = sum(q.numel() for q in detector.model.parameters())
         row = {
             "preset": name,
+            "arch": cfg.arch,
+            "input_mode": cfg.input_mode,
             "params_M": round(n_params / 1e6, 1),
             "input": f"{cfg.input_width}x{cfg.input_width * 3 // 4}",
             "views": args.views,
