@@ -57,14 +57,20 @@ def test_targets_centre_sampling_and_tiny_boxes():
     assert target.sum() == 0
 
 
-def test_dense_loss_has_gradients_into_the_detector(dataset):
+def model_dense_batch(dataset, views: int):
+    """A tiny seeded DETR with a dense loss attached, and a batch of ``views`` training views."""
     root, ann = dataset
     cfg = tiny_cpu_cfg()
     torch.manual_seed(0)
     model = build_detector(cfg)
     dense = DenseLoss(cfg.d_model)
     dense.attach(model)
-    batch = collate([DetectionDataset(load_records(ann, [1]), root, cfg)[i] for i in range(2)])
+    batch = collate([DetectionDataset(load_records(ann, [1]), root, cfg)[i] for i in range(views)])
+    return model, dense, batch
+
+
+def test_dense_loss_has_gradients_into_the_detector(dataset):
+    model, dense, batch = model_dense_batch(dataset, 2)
     out = model(pixel_values=batch["pixel_values"], pixel_mask=batch["pixel_mask"], labels=batch["labels"])
     parts = dense(out.encoder_last_hidden_state, batch["pixel_mask"], batch["labels"])
     assert torch.isfinite(parts["loss_dense"])
@@ -74,13 +80,7 @@ def test_dense_loss_has_gradients_into_the_detector(dataset):
 
 
 def test_dense_loss_alone_learns_objectness(dataset):
-    root, ann = dataset
-    cfg = tiny_cpu_cfg()
-    torch.manual_seed(0)
-    model = build_detector(cfg)
-    dense = DenseLoss(cfg.d_model)
-    dense.attach(model)
-    batch = collate([DetectionDataset(load_records(ann, [1]), root, cfg)[i] for i in range(4)])
+    model, dense, batch = model_dense_batch(dataset, 4)
     opt = torch.optim.AdamW([*model.parameters(), *dense.parameters()], lr=2e-3)
     losses = []
     for _ in range(20):
