@@ -62,14 +62,15 @@ class TrainConfig:
 TRAIN_PRESETS: dict[str, TrainConfig] = {
     # The paper's fine-tuning (section "Bounding Boxes from Detection Transformer"); flips only.
     "paper": TrainConfig(),
-    # From scratch on 2 CPU cores: larger batches and a 10x higher lr than fine-tuning (nothing pretrained to
-    # keep), the backbone at the same lr (it is random too), a short warm-up, cosine decay, flip + scale +
-    # colour jitter.
+    # From scratch on 2 CPU cores: larger batches and a 2x higher lr than fine-tuning (nothing pretrained to
+    # keep; 5e-4 collapsed), the random backbone at 1e-3, a short warm-up, cosine decay, flip + scale + colour
+    # jitter, resized views cached in memory. 16 epochs of the 3,630-view fold take about 75 min of one core.
     "cpu": TrainConfig(
-        epochs=30,
+        epochs=16,
         batch_size=8,
-        lr=5e-4,
-        backbone_lr=5e-4,
+        lr=2e-4,
+        backbone_lr=1e-3,
+        cache=True,
         weight_decay=1e-4,
         grad_clip=0.5,
         warmup_steps=100,

@@ -38,7 +38,18 @@ def tiny_checkpoints(folder: Path, seed: int = 0, detector: bool = True) -> tupl
     )
     if not detector:
         return pose, None
-    det_cfg = preset("cpu", d_model=32, encoder_layers=1, decoder_layers=1, ffn_dim=64, num_queries=8)
+    # DETR on colour: with random weights its softmax scores straddle 0.5, so detector mode returns boxes (a
+    # random Conditional DETR starts at the focal prior, 0.01, and would find nobody).
+    det_cfg = preset(
+        "cpu",
+        arch="detr",
+        input_mode="rgb",
+        d_model=32,
+        encoder_layers=1,
+        decoder_layers=1,
+        ffn_dim=64,
+        num_queries=8,
+    )
     det = folder / "detector"
     save_detector(det, build_detector(det_cfg), det_cfg, train={"data": "random init (tests)"})
     return pose, det

@@ -119,7 +119,7 @@ def test_cli_dense_weight_and_extra_data_resume(dataset, tmp_path):
     from safetensors.torch import load_file
 
     assert not any("dense" in k or "objectness" in k for k in load_file(run / "model.safetensors"))
-    assert preset("cpu").input_mode == "rgb"
+    assert preset("cpu").input_mode == "rgbd" and preset("cpu").arch == "conditional_detr"
 
 
 def test_conditional_detr_trains_saves_and_reloads(dataset, tmp_path):
