@@ -134,7 +134,7 @@ def test_conditional_detr_trains_saves_and_reloads(dataset, tmp_path):
     root, ann = dataset
     run = tmp_path / "run"
     argv = [
-        "--data", str(root), "--annotations", ann, "--holdout-day", "2", "--arch", "conditional_detr",
+        "--data", str(root), "--annotations", ann, "--holdout-day", "2", "--arch", "conditional_detr", "--input", "rgb",
         "--input-width", str(W), "--queries", "6", "--epochs", "1", "--batch-size", "2", "--no-progress",
         "--out", str(run),
     ]  # fmt: skip
@@ -186,7 +186,13 @@ def test_export_sets_the_threshold_and_halves_the_file(dataset, tmp_path):
     import cv2
 
     images = [cv2.cvtColor(cv2.imread(str(root / r.file_name)), cv2.COLOR_BGR2RGB) for r in records]
-    for a, b in zip(
-        full.detect(images, score_threshold=0.0), half.detect(images, score_threshold=0.0), strict=True
-    ):
+    depths = [
+        cv2.imread(str(root / r.file_name.replace("color", "depth")), cv2.IMREAD_UNCHANGED) for r in records
+    ]
+    pairs = zip(
+        full.detect(images, depths, score_threshold=0.0),
+        half.detect(images, depths, score_threshold=0.0),
+        strict=True,
+    )
+    for a, b in pairs:
         np.testing.assert_allclose(a.boxes, b.boxes, atol=0.5)  # pixels; float16 weights

@@ -154,10 +154,14 @@ def test_cli_checkpoint_gives_identical_predictions(dataset, tmp_path):
     )
     assert a == b == json.loads(out.read_text())
     # Batched detection equals one view at a time.
+    assert detector.cfg.input_mode == "rgbd"  # the cpu preset reads colour + depth
     views = [cv2.cvtColor(cv2.imread(str(root / r.file_name)), cv2.COLOR_BGR2RGB) for r in records]
-    together = detector.detect(views, score_threshold=0.0)
-    for view, det in zip(views, together, strict=True):
-        alone = detector.detect([view], score_threshold=0.0)[0]
+    depths = [
+        cv2.imread(str(root / r.file_name.replace("color", "depth")), cv2.IMREAD_UNCHANGED) for r in records
+    ]
+    together = detector.detect(views, depths, score_threshold=0.0)
+    for view, depth, det in zip(views, depths, together, strict=True):
+        alone = detector.detect([view], [depth], score_threshold=0.0)[0]
         np.testing.assert_allclose(alone.boxes, det.boxes, atol=1e-4)
         np.testing.assert_allclose(alone.scores, det.scores, atol=1e-5)
 
