@@ -10,11 +10,12 @@ import torch
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
+from test_detector_train import W, tiny_cpu_cfg, write_dataset  # noqa: E402
+
 from detector import train as train_cli  # noqa: E402
 from detector.data import DetectionDataset, collate, load_records  # noqa: E402
 from detector.dense import DenseLoss, dense_targets, token_centres  # noqa: E402
 from detector.model import build_detector, preset  # noqa: E402
-from tests.test_detector_train import W, tiny_cpu_cfg, write_dataset  # noqa: E402
 
 
 @pytest.fixture(scope="module")
