@@ -15,9 +15,9 @@ from pathlib import Path
 
 import torch
 from safetensors.torch import load_file, save_file
-from transformers import ConditionalDetrConfig, DetrConfig, DetrForObjectDetection
+from transformers import DetrForObjectDetection
 
-from detector.model import DetectorConfig, from_detr_config
+from detector.model import DetectorConfig, arch_classes, from_detr_config
 
 WEIGHTS, CONFIG, STATE = "model.safetensors", "config.json", "training_state.pt"
 
@@ -40,17 +40,27 @@ def save_checkpoint(
     cfg: DetectorConfig,
     train: dict | None = None,
     progress: dict | None = None,
+    half: bool = False,
+    top: dict | None = None,
 ) -> Path:
-    """Write ``model``'s weights and the resolved configs to ``path`` (a folder or ``NAME.safetensors``)."""
+    """Write ``model``'s weights and the resolved configs to ``path`` (a folder or ``NAME.safetensors``).
+
+    ``half`` stores floating-point weights as float16 (loading casts them back); ``top`` adds keys at the top of
+    ``config.json`` (e.g. the shipped weights' ``trained_on`` line).
+    """
     path = Path(path)
     if path.suffix != ".safetensors":
         path.mkdir(parents=True, exist_ok=True)
     else:
         path.parent.mkdir(parents=True, exist_ok=True)
     weights, config = checkpoint_files(path)
-    state = {k: v.detach().contiguous().cpu() for k, v in model.state_dict().items()}
-    save_file(state, str(weights), metadata={"format": "pt"})
+    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
+    if half:
+        state = {k: v.half() if v.is_floating_point() else v for k, v in state.items()}
+    state = {k: v.contiguous() for k, v in state.items()}
+    save_file(state, str(weights), metadata={"format": "pt", "dtype": "float16" if half else "as trained"})
     meta = {
+        **(top or {}),
         "detector": asdict(cfg),
         "detr": model.config.to_dict(),
         "train": train,
@@ -81,7 +91,7 @@ def load_checkpoint(
     cfg = replace(cfg, pretrained=None)
     detr = dict(meta["detr"])
     detr.pop("transformers_version", None)
-    config_class = ConditionalDetrConfig if detr.get("model_type") == "conditional_detr" else DetrConfig
+    config_class = arch_classes(detr.get("model_type", "detr"))[0]
     model = from_detr_config(config_class.from_dict(detr), cfg)
     missing, unexpected = model.load_state_dict(load_file(str(weights)), strict=False)
     if missing or unexpected:

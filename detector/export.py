@@ -20,9 +20,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from safetensors.torch import save_file
 
-from detector.checkpoint import checkpoint_files, load_checkpoint, save_checkpoint
+from detector.checkpoint import load_checkpoint, save_checkpoint
 from detector.data import load_records
 from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
@@ -52,23 +51,10 @@ def export(
     model, cfg, meta = load_checkpoint(run)
     if threshold is not None:
         cfg = replace(cfg, score_threshold=float(threshold))
-    extra = dict(cfg.extra)
-    if trained_on:
-        extra["trained_on_text"] = trained_on
     if threshold_metrics is not None:
-        extra["threshold_chosen_on"] = threshold_metrics
-    cfg = replace(cfg, extra=extra)
-    weights = save_checkpoint(out, model, cfg, meta.get("train"), meta.get("progress"))
-    if half:
-        state = {
-            k: (v.half() if v.is_floating_point() else v).contiguous() for k, v in model.state_dict().items()
-        }
-        save_file(state, str(weights), metadata={"format": "pt", "dtype": "float16"})
-    if trained_on:
-        _, config = checkpoint_files(out)
-        data = json.loads(config.read_text())
-        config.write_text(json.dumps({"trained_on": trained_on, **data}, indent=2))
-    return weights
+        cfg = replace(cfg, extra={**cfg.extra, "threshold_chosen_on": threshold_metrics})
+    top = {"trained_on": trained_on} if trained_on else None
+    return save_checkpoint(out, model, cfg, meta.get("train"), meta.get("progress"), half=half, top=top)
 
 
 def main(argv: list[str] | None = None) -> Path:

@@ -33,14 +33,13 @@ from transformers import (
 )
 
 INPUT_CHANNELS = {"rgb": 3, "depth": 1, "rgbd": 4}
-# The transformers classes of each ``arch``: DETR (the paper's) and Conditional DETR (Meng et al. 2021: the
+# The transformers classes of each ``arch`` (the key is also the config's ``model_type``): DETR (the paper's) and Conditional DETR (Meng et al. 2021: the
 # same backbone, encoder and set loss, but queries that predict a reference point and a focal class loss; it
 # converges several times faster from scratch, see docs/detector.md).
 ARCHS = {
     "detr": (DetrConfig, DetrForObjectDetection),
     "conditional_detr": (ConditionalDetrConfig, ConditionalDetrForObjectDetection),
 }
-MODEL_TYPES = {"detr": "detr", "conditional_detr": "conditional_detr"}  # arch -> config.model_type
 
 
 @dataclass
@@ -192,19 +191,16 @@ def set_trainable(model: DetrForObjectDetection, cfg: DetectorConfig) -> None:
                 p.requires_grad_(False)
 
 
-def model_class(config) -> type:
-    """The transformers model class of a DETR-family config (by its ``model_type``)."""
-    for arch, model_type in MODEL_TYPES.items():
-        if config.model_type == model_type:
-            return ARCHS[arch][1]
-    raise ValueError(
-        f"unsupported detector model_type {config.model_type!r}; expected one of {sorted(MODEL_TYPES.values())}"
-    )
+def arch_classes(model_type: str) -> tuple[type, type]:
+    """The transformers (config class, model class) of a DETR-family ``model_type``."""
+    if model_type not in ARCHS:
+        raise ValueError(f"unsupported detector model_type {model_type!r}; expected one of {sorted(ARCHS)}")
+    return ARCHS[model_type]
 
 
 def from_detr_config(config, cfg: DetectorConfig) -> DetrForObjectDetection:
     """A randomly initialised model of ``config``, with ``cfg``'s norm and freezing choices applied."""
-    model = model_class(config)(config)
+    model = arch_classes(config.model_type)[1](config)
     if cfg.trainable_norm:
         _unfreeze_norm(model.model.backbone.model)
     set_trainable(model, cfg)
