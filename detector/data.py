@@ -19,7 +19,7 @@ from torch.utils.data import Dataset
 
 from detector.augment import AugmentConfig, augment_view
 from detector.boxes import coco_to_xyxy, scale_xyxy, xyxy_to_cxcywh_norm
-from detector.inputs import batch_inputs, normalise, resize_factor, resize_view
+from detector.inputs import batch_inputs, box_frame, normalise, resize_factor, resize_view
 from detector.model import DetectorConfig
 from posenet.data.images import depth_file_name, read_color, read_depth
 
@@ -125,7 +125,7 @@ class DetectionDataset(Dataset):
 
     With ``cache``, resized views are kept in memory after their first read (one process: ``num_workers``
     0). Item: ``(pixel_values (C, H, W), labels, image_id)``; ``labels`` is DETR's dict of ``class_labels (K,)``
-    (all 0, "person") and ``boxes (K, 4)`` normalised (cx, cy, w, h) of the item's own (unpadded) size.
+    (all 0, "person") and ``boxes (K, 4)`` normalised (cx, cy, w, h) of the item's own size (``inputs.box_frame``).
     """
 
     def __init__(
@@ -161,16 +161,16 @@ class DetectionDataset(Dataset):
         if self.augment is not None:
             color, depth, boxes = augment_view(color, depth, boxes, self.augment, self.rng)
         x = normalise(color, depth, self.cfg)  # (C, H, W)
-        h, w = x.shape[1:]
+        w, h = box_frame(x.shape[2], x.shape[1], self.cfg)
         target = torch.from_numpy(xyxy_to_cxcywh_norm(np.asarray(boxes, np.float32), w, h)).float()
         labels = {"class_labels": torch.zeros(len(target), dtype=torch.long), "boxes": target.reshape(-1, 4)}
         return x, labels, rec.image_id
 
 
-def collate(batch: list) -> dict:
-    """Items to ``{"pixel_values", "pixel_mask", "labels", "image_ids"}`` (padded, see
+def collate(batch: list, multiple: int = 1) -> dict:
+    """Items to ``{"pixel_values", "pixel_mask", "labels", "image_ids"}`` (padded to ``multiple``, see
     ``inputs.batch_inputs``)."""
-    pixels, mask = batch_inputs([b[0] for b in batch])
+    pixels, mask = batch_inputs([b[0] for b in batch], multiple)
     return {
         "pixel_values": pixels,
         "pixel_mask": mask,

@@ -69,17 +69,27 @@ def normalise(color: np.ndarray | None, depth: np.ndarray | None, cfg: DetectorC
     return torch.cat(channels, dim=0)
 
 
-def batch_inputs(tensors: Sequence[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+def _round_up(n: int, multiple: int) -> int:
+    return -(-n // multiple) * multiple
+
+
+def box_frame(width: int, height: int, cfg: DetectorConfig) -> tuple[int, int]:
+    """The (width, height) that a ``width`` x ``height`` view's normalised boxes refer to: the view itself for
+    DETR, the view padded to ``cfg.pad_multiple`` for RT-DETR (whose anchors span the padded grid)."""
+    return _round_up(width, cfg.pad_multiple), _round_up(height, cfg.pad_multiple)
+
+
+def batch_inputs(tensors: Sequence[torch.Tensor], multiple: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
     """Pad ``(C, H_i, W_i)`` inputs at the bottom/right into ``pixel_values (B, C, H, W)`` and ``pixel_mask
-    (B, H, W)``.
+    (B, H, W)``; ``H`` and ``W`` are rounded up to ``multiple``.
 
     The mask is 1 on real pixels: DETR's positional encoding and attention then ignore the padding.
     """
     if not tensors:
         raise ValueError("batch_inputs needs at least one image")
     c = tensors[0].shape[0]
-    h = max(t.shape[1] for t in tensors)
-    w = max(t.shape[2] for t in tensors)
+    h = _round_up(max(t.shape[1] for t in tensors), multiple)
+    w = _round_up(max(t.shape[2] for t in tensors), multiple)
     pixels = tensors[0].new_zeros((len(tensors), c, h, w))
     mask = torch.zeros((len(tensors), h, w), dtype=torch.long)
     for i, t in enumerate(tensors):
@@ -94,7 +104,8 @@ def prepare_views(
     """Full-size views to one padded batch.
 
     Returns ``pixel_values (B, C, H, W)``, ``pixel_mask (B, H, W)``, the resize factor of each view and the
-    ``(width, height)`` of each resized view (what DETR's normalised boxes refer to).
+    ``(width, height)`` that each view's normalised boxes refer to (``box_frame``: the resized view, padded for
+    RT-DETR).
     """
     if len(colors) != len(depths):
         raise ValueError(f"got {len(colors)} colour images but {len(depths)} depth images")
@@ -110,6 +121,6 @@ def prepare_views(
         t = normalise(c, d, cfg)
         tensors.append(t)
         factors.append(factor)
-        sizes.append((t.shape[2], t.shape[1]))
-    pixels, mask = batch_inputs(tensors)
+        sizes.append(box_frame(t.shape[2], t.shape[1], cfg))
+    pixels, mask = batch_inputs(tensors, cfg.pad_multiple)
     return pixels, mask, factors, sizes

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import timm
 import torch
 from torch import nn
 from transformers import (
@@ -30,15 +31,20 @@ from transformers import (
     ConditionalDetrForObjectDetection,
     DetrConfig,
     DetrForObjectDetection,
+    RTDetrConfig,
+    RTDetrForObjectDetection,
 )
 
 INPUT_CHANNELS = {"rgb": 3, "depth": 1, "rgbd": 4}
 # The transformers classes of each ``arch`` (the key is also the config's ``model_type``): DETR (the paper's) and Conditional DETR (Meng et al. 2021: the
 # same backbone, encoder and set loss, but queries that predict a reference point and a focal class loss; it
-# converges several times faster from scratch, see docs/detector.md).
+# converges several times faster from scratch, see docs/detector.md) and RT-DETR (Zhao et al. 2024: three backbone
+# scales, a hybrid encoder, the decoder's queries picked from the encoder's best-scoring tokens, denoising queries
+# and a varifocal loss; a DETR that trains like a dense detector).
 ARCHS = {
     "detr": (DetrConfig, DetrForObjectDetection),
     "conditional_detr": (ConditionalDetrConfig, ConditionalDetrForObjectDetection),
+    "rt_detr": (RTDetrConfig, RTDetrForObjectDetection),
 }
 
 
@@ -47,12 +53,14 @@ class DetectorConfig:
     """Architecture and preprocessing of a detector. Training hyper-parameters live in ``detector.train``."""
 
     preset: str = "cpu"
-    arch: str = "detr"  # "detr" (the paper's) or "conditional_detr" (ARCHS)
+    arch: str = "detr"  # "detr" (the paper's), "conditional_detr" or "rt_detr" (ARCHS)
     backbone: str = (
         "resnet18"  # a timm model name (timm builds offline; transformers' own ResNet calls the hub)
     )
     dilation: bool = False  # DC5: stride 16 in the last stage instead of 32 (the paper's ResNet-101-DC5)
-    backbone_stage: int = 3  # last timm stage used (4 = the whole ResNet); DETR reads only the last one
+    # Last timm stage used (4 = the whole ResNet). DETR and Conditional DETR read only that stage; RT-DETR reads it
+    # and the two before it (stages 2-4 of a ResNet: strides 8, 16, 32).
+    backbone_stage: int = 3
     trainable_norm: bool = (
         True  # swap DETR's frozen batch norm for trainable batch norm (training from scratch)
     )
@@ -88,11 +96,22 @@ class DetectorConfig:
             raise ValueError(f"input_mode must be one of {sorted(INPUT_CHANNELS)}, got {self.input_mode!r}")
         if not 1 <= self.backbone_stage <= 4:
             raise ValueError(f"backbone_stage must be in 1..4, got {self.backbone_stage}")
+        if self.arch == "rt_detr" and self.backbone_stage < 3:
+            raise ValueError(
+                f"rt_detr reads three backbone stages: backbone_stage must be 3 or 4, got {self.backbone_stage}"
+            )
         self.rgb_mean, self.rgb_std = tuple(self.rgb_mean), tuple(self.rgb_std)
 
     @property
     def num_channels(self) -> int:
         return INPUT_CHANNELS[self.input_mode]
+
+    @property
+    def pad_multiple(self) -> int:
+        """Inputs are padded to a multiple of this. RT-DETR's feature pyramid needs sizes divisible by its
+        coarsest stride (32), and its anchors span the padded grid, so its boxes are normalised by the padded size
+        (``detector.inputs.box_frame``)."""
+        return 32 if self.arch == "rt_detr" else 1
 
 
 PRESETS: dict[str, DetectorConfig] = {
@@ -137,6 +156,8 @@ def detr_config(cfg: DetectorConfig) -> DetrConfig | ConditionalDetrConfig:
     }
     if cfg.dilation:
         backbone["output_stride"] = 16
+    if cfg.arch == "rt_detr":
+        return _rt_detr_config(cfg, backbone)
     config_class = ARCHS[cfg.arch][0]
     extra = {"eos_coefficient": cfg.eos_coefficient} if cfg.arch == "detr" else {}
     return config_class(
@@ -157,6 +178,44 @@ def detr_config(cfg: DetectorConfig) -> DetrConfig | ConditionalDetrConfig:
         auxiliary_loss=cfg.auxiliary_loss,
         dilation=cfg.dilation,
         **extra,
+    )
+
+
+def _rt_detr_config(cfg: DetectorConfig, backbone: dict) -> RTDetrConfig:
+    """RT-DETR on the last three stages of the timm backbone; widths follow ``cfg`` (``encoder_layers`` counts
+    the attention layers on the coarsest scale, RT-DETR's AIFI)."""
+    stages = [cfg.backbone_stage - 2, cfg.backbone_stage - 1, cfg.backbone_stage]
+    # The stages' channels and strides, from a throwaway timm model (random weights, offline).
+    info = timm.create_model(
+        cfg.backbone,
+        pretrained=False,
+        features_only=True,
+        out_indices=stages,
+        in_chans=cfg.num_channels,
+        **({"output_stride": 16} if cfg.dilation else {}),
+    ).feature_info
+    return RTDetrConfig(
+        backbone_config={**backbone, "out_indices": stages},
+        num_channels=cfg.num_channels,
+        num_labels=1,
+        id2label={0: "person"},
+        label2id={"person": 0},
+        freeze_backbone_batch_norms=not cfg.trainable_norm,
+        encoder_in_channels=info.channels(),
+        feat_strides=info.reduction(),
+        encoder_hidden_dim=cfg.d_model,
+        decoder_in_channels=[cfg.d_model] * 3,
+        d_model=cfg.d_model,
+        encoder_layers=cfg.encoder_layers,
+        decoder_layers=cfg.decoder_layers,
+        encoder_attention_heads=cfg.attention_heads,
+        decoder_attention_heads=cfg.attention_heads,
+        encoder_ffn_dim=cfg.ffn_dim,
+        decoder_ffn_dim=cfg.ffn_dim,
+        num_queries=cfg.num_queries,
+        num_denoising=cfg.num_queries,  # denoising queries: noised copies of the true boxes (DN-DETR)
+        dropout=cfg.dropout,
+        auxiliary_loss=cfg.auxiliary_loss,
     )
 
 
@@ -187,7 +246,7 @@ def set_trainable(model: DetrForObjectDetection, cfg: DetectorConfig) -> None:
         p.requires_grad_(True)
     if cfg.freeze_stem:
         for name, p in model.model.backbone.model.named_parameters():
-            if not name.startswith(("layer2", "layer3", "layer4")):
+            if not {"layer2", "layer3", "layer4"} & set(name.split(".")):
                 p.requires_grad_(False)
 
 

@@ -15,6 +15,7 @@ Trains on every day but the held-out one. After each epoch it writes ``RUN/model
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import time
@@ -109,7 +110,7 @@ def train(
         train_set,
         batch_size=cfg.batch_size,
         shuffle=True,
-        collate_fn=collate,
+        collate_fn=functools.partial(collate, multiple=det_cfg.pad_multiple),
         num_workers=cfg.num_workers,
         worker_init_fn=worker_init if cfg.num_workers else None,
         drop_last=len(train_set) > cfg.batch_size,
@@ -235,14 +236,27 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--pretrained", help="local folder (or hub id) of real DETR weights to fine-tune")
     g.add_argument(
+        "--init",
+        metavar="CKPT",
+        help="start from the weights and architecture of one of our checkpoints (a run folder or a .safetensors "
+        "file, e.g. detector/weights/default.safetensors) with a fresh optimiser and schedule: fine-tune the "
+        "shipped detector on your own recordings, or train a finished run for longer",
+    )
+    g.add_argument(
         "--input", choices=["rgb", "depth", "rgbd"], help="input channels (default: rgb, the paper)"
     )
     g.add_argument(
         "--arch",
-        choices=["detr", "conditional_detr"],
-        help="detr (the paper's) or conditional_detr (faster from scratch; docs/detector.md)",
+        choices=["detr", "conditional_detr", "rt_detr"],
+        help="detr (the paper's), conditional_detr or rt_detr (faster from scratch; docs/detector.md)",
     )
     g.add_argument("--backbone", help="timm backbone name (e.g. resnet18, regnetx_002)")
+    g.add_argument(
+        "--backbone-stage",
+        type=int,
+        choices=[1, 2, 3, 4],
+        help="last backbone stage used (RT-DETR reads it and the two before it)",
+    )
     g.add_argument("--queries", type=int, help="number of DETR queries")
     g.add_argument("--input-width", type=int, help="images are resized to this width")
     g = p.add_argument_group("training (defaults come from the preset)")
@@ -329,6 +343,30 @@ def main(argv: list[str] | None = None) -> list[dict]:
     if args.resume and (out / "config.json").is_file():
         model, det_cfg, _ = load_checkpoint(out)
         model.train()
+    elif args.init:
+        if (
+            args.pretrained
+            or args.arch
+            or args.backbone
+            or args.queries
+            or args.input
+            or args.input_width
+            or args.backbone_stage
+        ):
+            raise ValueError(
+                "--init takes the architecture and input of its checkpoint; drop --pretrained, --arch, "
+                "--backbone, --backbone-stage, --queries, --input and --input-width"
+            )
+        model, det_cfg, _ = load_checkpoint(args.init)
+        model.float().train()
+        det_cfg.extra["trained_on"] = {
+            "init": str(args.init),
+            "init_trained_on": det_cfg.extra.get("trained_on"),
+            "data": str(args.data),
+            "days": train_days,
+            "extra_data": [str(e) for e in args.extra_data],
+            "views": len(records),
+        }
     else:
         det_cfg = preset(
             args.preset,
@@ -338,6 +376,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             backbone=args.backbone,
             num_queries=args.queries,
             input_width=args.input_width,
+            backbone_stage=args.backbone_stage,
         )
         det_cfg.extra["trained_on"] = {
             "data": str(args.data),

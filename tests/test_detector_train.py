@@ -75,8 +75,16 @@ def dataset(tmp_path_factory):
 
 def tiny_cpu_cfg(**kw):
     # The cpu preset, narrowed further so that tests take seconds; DETR on colour unless a test says otherwise.
-    kw = {"arch": "detr", "input_mode": "rgb", **kw}
-    return preset("cpu", input_width=W, d_model=64, ffn_dim=128, num_queries=6, **kw)
+    kw = {
+        "arch": "detr",
+        "input_mode": "rgb",
+        "input_width": W,
+        "d_model": 64,
+        "ffn_dim": 128,
+        "num_queries": 6,
+        **kw,
+    }
+    return preset("cpu", **kw)
 
 
 def test_few_steps_lower_the_loss(dataset):

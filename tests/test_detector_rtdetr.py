@@ -1,0 +1,150 @@
+"""RT-DETR (``--arch rt_detr``), padded inputs, and ``--init`` (continue from one of our checkpoints)."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+import torch
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+
+from test_detector_train import W, tiny_cpu_cfg, write_dataset  # noqa: E402
+
+from detector import train as train_cli  # noqa: E402
+from detector.checkpoint import load_checkpoint, read_config  # noqa: E402
+from detector.data import DetectionDataset, collate, load_records, read_record  # noqa: E402
+from detector.infer import PersonDetector, decode  # noqa: E402
+from detector.inputs import batch_inputs, box_frame, prepare_views  # noqa: E402
+from detector.model import build_detector  # noqa: E402
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tiny_rt")
+    return root, write_dataset(root)
+
+
+def tiny_rt_cfg(**kw):
+    return tiny_cpu_cfg(arch="rt_detr", backbone_stage=4, encoder_layers=1, **kw)
+
+
+def test_padding_to_a_multiple_and_the_box_frame():
+    pixels, mask = batch_inputs([torch.ones(3, 84, 112), torch.ones(3, 60, 80)], multiple=32)
+    assert pixels.shape == (2, 3, 96, 128) and mask.shape == (2, 96, 128)
+    assert mask[0].sum() == 84 * 112 and mask[1].sum() == 60 * 80
+    assert pixels[0, :, 84:].abs().sum() == 0 and pixels[0, :, :, 112:].abs().sum() == 0
+    assert box_frame(112, 84, tiny_rt_cfg()) == (128, 96)  # RT-DETR: the padded grid
+    assert box_frame(112, 84, tiny_cpu_cfg()) == (112, 84)  # DETR: the view itself
+    with pytest.raises(ValueError, match="three backbone stages"):
+        tiny_cpu_cfg(arch="rt_detr", backbone_stage=2)
+
+
+@pytest.mark.parametrize("arch", ["detr", "rt_detr"])
+def test_training_targets_decode_back_to_the_annotated_boxes(dataset, arch):
+    """The normalised training targets, read as predictions, decode to the annotation's pixel boxes: training
+    and inference agree on the box frame, also when RT-DETR pads a 112x84 input to 128x96."""
+    root, ann = dataset
+    cfg = (tiny_rt_cfg if arch == "rt_detr" else tiny_cpu_cfg)(input_width=112)
+    rec = next(r for r in load_records(ann, [1]) if len(r.boxes) == 2)
+    _, labels, _ = DetectionDataset([rec], root, cfg)[0]
+    color, depth = read_record(rec, root, True, False)
+    pixels, _, factors, sizes = prepare_views([color], [depth], cfg)
+    assert pixels.shape[2:] == ((96, 128) if arch == "rt_detr" else (84, 112))
+    logits = torch.full((1, 2, 1), 10.0)
+    dets = decode(logits, labels["boxes"][None], sizes, factors, [(W, 96)], 0.5)
+    np.testing.assert_allclose(dets[0].boxes, np.asarray(rec.boxes, np.float32), atol=1e-3)
+
+
+def test_rt_detr_few_steps_lower_the_loss(dataset):
+    root, ann = dataset
+    cfg = tiny_rt_cfg()
+    torch.manual_seed(0)
+    model = build_detector(cfg)
+    assert type(model).__name__ == "RTDetrForObjectDetection"
+    assert not any(type(m).__name__.endswith("FrozenBatchNorm2d") for m in model.modules())
+    batch = collate(
+        [DetectionDataset(load_records(ann, [1]), root, cfg)[i] for i in range(4)], cfg.pad_multiple
+    )
+    opt = torch.optim.AdamW(model.parameters(), lr=1e-3)
+    losses = []
+    for _ in range(15):
+        model.train()
+        out = model(
+            pixel_values=batch["pixel_values"], pixel_mask=batch["pixel_mask"], labels=batch["labels"]
+        )
+        opt.zero_grad()
+        out.loss.backward()
+        opt.step()
+        losses.append(out.loss.item())
+    assert np.isfinite(losses).all()
+    assert losses[-1] < 0.8 * losses[0], losses
+
+
+def test_rt_detr_cli_trains_saves_reloads_and_init_continues(dataset, tmp_path):
+    root, ann = dataset
+    run = tmp_path / "rt"
+    common = ["--data", str(root), "--annotations", ann, "--holdout-day", "2", "--epochs", "1", "--batch-size", "2",
+              "--no-progress"]  # fmt: skip
+    arch = [
+        "--arch",
+        "rt_detr",
+        "--backbone-stage",
+        "4",
+        "--input",
+        "rgbd",
+        "--input-width",
+        "112",
+        "--queries",
+        "6",
+    ]
+    log = train_cli.main([*common, *arch, "--out", str(run)])
+    assert np.isfinite(log[-1]["loss"]) and "AP50" in log[-1]
+    model, cfg, meta = load_checkpoint(run)
+    assert cfg.arch == "rt_detr" and meta["detr"]["model_type"] == "rt_detr"
+    records = load_records(ann, [2])
+    views = [read_record(r, root, True, True) for r in records]
+    images, depths = [c for c, _ in views], [d for _, d in views]
+    a = PersonDetector(model, cfg).detect(images, depths, score_threshold=0.0)
+    b = PersonDetector.from_checkpoint(run).detect(images, depths, score_threshold=0.0)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x.boxes, y.boxes)
+        assert len(x.scores) == 6 and (x.scores >= 0).all() and (x.scores <= 1).all()
+        assert (x.boxes[:, 2] <= W).all() and (x.boxes[:, 3] <= 96).all()  # clipped to the full view
+
+    # --init: the architecture and weights of `run`, a fresh optimiser, and the origin recorded.
+    cont = tmp_path / "cont"
+    train_cli.main([*common, "--init", str(run), "--lr", "1e-5", "--out", str(cont)])
+    saved = read_config(cont)
+    assert saved["detector"]["arch"] == "rt_detr" and saved["progress"]["step"] == log[-1]["step"]
+    assert saved["detector"]["extra"]["trained_on"]["init"] == str(run)
+    c = PersonDetector.from_checkpoint(cont).detect(images, depths, score_threshold=0.0)
+    assert any(not np.array_equal(x.boxes, y.boxes) for x, y in zip(a, c, strict=True))  # it trained on
+    with pytest.raises(ValueError, match="--init takes the architecture"):
+        train_cli.main([*common, "--init", str(run), "--arch", "detr", "--out", str(tmp_path / "bad")])
+
+
+def test_init_from_a_half_precision_export(dataset, tmp_path):
+    """The shipped weights are float16 files: ``--init`` from one trains in float32."""
+    root, ann = dataset
+    cfg = tiny_cpu_cfg()
+    from detector.checkpoint import save_checkpoint
+
+    torch.manual_seed(0)
+    save_checkpoint(tmp_path / "w.safetensors", build_detector(cfg), cfg, half=True)
+    log = train_cli.main(
+        ["--data", str(root), "--annotations", ann, "--holdout-day", "2", "--epochs", "1", "--batch-size", "2",
+         "--no-progress", "--init", str(tmp_path / "w.safetensors"), "--out", str(tmp_path / "run")]
+    )  # fmt: skip
+    assert np.isfinite(log[-1]["loss"])
+    model, _, _ = load_checkpoint(tmp_path / "run")
+    assert all(p.dtype == torch.float32 for p in model.parameters())
