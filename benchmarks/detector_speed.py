@@ -21,12 +21,8 @@ from detector.model import PRESETS, build_detector, preset
 
 # Variants compared beside the presets: (preset, overrides).
 VARIANTS = {
-    "cpu_detr_rgb": ("cpu", {"arch": "detr", "input_mode": "rgb", "num_queries": 16}),
-    "cpu_conditional_rgbd": ("cpu", {"arch": "conditional_detr", "input_mode": "rgbd", "num_queries": 20}),
-    "cpu_rt_detr_rgbd": (
-        "cpu",
-        {"arch": "rt_detr", "backbone_stage": 4, "input_mode": "rgbd", "num_queries": 20},
-    ),
+    "cpu_detr_rgb": ("cpu", {"arch": "detr", "backbone_stage": 3, "input_mode": "rgb", "num_queries": 16}),
+    "cpu_conditional_rgbd": ("cpu", {"arch": "conditional_detr", "backbone_stage": 3, "input_mode": "rgbd"}),
 }
 
 

@@ -118,6 +118,11 @@ def train(
     )
     groups = param_groups(model, cfg.lr, cfg.backbone_lr, cfg.weight_decay)
     dense = None
+    if cfg.dense_weight > 0 and det_cfg.arch == "rt_detr":
+        raise ValueError(
+            "--dense-weight reads the single-scale encoder of detr / conditional_detr; rt_detr already trains "
+            "its encoder densely (query selection): drop --dense-weight"
+        )
     if cfg.dense_weight > 0:
         dense = DenseLoss(model.config.d_model)
         dense.attach(model)

@@ -44,6 +44,7 @@ def tiny_checkpoints(folder: Path, seed: int = 0, detector: bool = True) -> tupl
         "cpu",
         arch="detr",
         input_mode="rgb",
+        backbone_stage=3,
         d_model=32,
         encoder_layers=1,
         decoder_layers=1,

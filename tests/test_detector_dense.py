@@ -103,7 +103,7 @@ def test_cli_dense_weight_and_extra_data_resume(dataset, tmp_path):
     argv = [
         "--data", str(root), "--annotations", ann, "--holdout-day", "2", "--extra-data", str(extra),
         "--input-width", str(W), "--queries", "6", "--epochs", "1", "--batch-size", "2",
-        "--dense-weight", "1", "--cache", "--no-progress", "--out", str(run),
+        "--arch", "conditional_detr", "--backbone-stage", "3", "--dense-weight", "1", "--cache", "--no-progress", "--out", str(run),
     ]  # fmt: skip
     log = train_cli.main(argv)
     assert log[-1]["loss_dense"] > 0 and "dense_focal" in log[-1]
@@ -120,7 +120,7 @@ def test_cli_dense_weight_and_extra_data_resume(dataset, tmp_path):
     from safetensors.torch import load_file
 
     assert not any("dense" in k or "objectness" in k for k in load_file(run / "model.safetensors"))
-    assert preset("cpu").input_mode == "rgbd" and preset("cpu").arch == "conditional_detr"
+    assert preset("cpu").input_mode == "rgbd" and preset("cpu").arch == "rt_detr"
 
 
 def test_conditional_detr_trains_saves_and_reloads(dataset, tmp_path):
@@ -136,6 +136,7 @@ def test_conditional_detr_trains_saves_and_reloads(dataset, tmp_path):
     run = tmp_path / "run"
     argv = [
         "--data", str(root), "--annotations", ann, "--holdout-day", "2", "--arch", "conditional_detr", "--input", "rgb",
+        "--backbone-stage", "3",
         "--input-width", str(W), "--queries", "6", "--epochs", "1", "--batch-size", "2", "--no-progress",
         "--out", str(run),
     ]  # fmt: skip
@@ -167,6 +168,7 @@ def test_export_sets_the_threshold_and_halves_the_file(dataset, tmp_path):
         [
             "--data", str(root), "--annotations", ann, "--holdout-day", "2", "--input-width", str(W),
             "--queries", "6", "--epochs", "1", "--batch-size", "2", "--no-progress", "--out", str(run),
+            "--arch", "conditional_detr", "--backbone-stage", "3",
         ]
     )  # fmt: skip
     out = tmp_path / "ship" / "default.safetensors"

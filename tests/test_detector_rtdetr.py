@@ -184,7 +184,8 @@ def test_int8_export_keeps_the_outputs(dataset, tmp_path):
     run = tmp_path / "run"
     train_cli.main(
         ["--data", str(root), "--annotations", ann, "--holdout-day", "2", "--epochs", "1", "--batch-size", "2",
-         "--no-progress", "--input", "rgbd", "--queries", "6", "--input-width", str(W), "--out", str(run)]
+         "--no-progress", "--arch", "detr", "--backbone-stage", "3", "--input", "rgbd", "--queries", "6",
+         "--input-width", str(W), "--out", str(run)]
     )  # fmt: skip
     out = tmp_path / "w8.safetensors"
     export_cli.main([str(run), "--out", str(out), "--precision", "int8", "--threshold", "0.3"])
@@ -199,3 +200,12 @@ def test_int8_export_keeps_the_outputs(dataset, tmp_path):
         b = small.model(pixel_values=pixels, pixel_mask=mask)
     torch.testing.assert_close(b.pred_boxes, a.pred_boxes, atol=2.0 / W, rtol=0)  # within 2 px
     torch.testing.assert_close(b.logits.softmax(-1), a.logits.softmax(-1), atol=0.03, rtol=0)
+
+
+def test_dense_loss_is_refused_for_rt_detr(dataset, tmp_path):
+    root, ann = dataset
+    with pytest.raises(ValueError, match="drop --dense-weight"):
+        train_cli.main(
+            ["--data", str(root), "--annotations", ann, "--holdout-day", "2", "--epochs", "1", "--no-progress",
+             "--input-width", str(W), "--queries", "6", "--dense-weight", "1", "--out", str(tmp_path / "run")]
+        )  # fmt: skip

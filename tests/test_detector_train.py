@@ -78,6 +78,7 @@ def tiny_cpu_cfg(**kw):
     kw = {
         "arch": "detr",
         "input_mode": "rgb",
+        "backbone_stage": 3,
         "input_width": W,
         "d_model": 64,
         "ffn_dim": 128,
