@@ -163,25 +163,27 @@ def detr_config(cfg: DetectorConfig) -> DetrConfig | ConditionalDetrConfig:
         return _rt_detr_config(cfg, backbone)
     config_class = ARCHS[cfg.arch][0]
     extra = {"eos_coefficient": cfg.eos_coefficient} if cfg.arch == "detr" else {}
-    return config_class(
-        backbone_config=backbone,
-        num_channels=cfg.num_channels,
-        num_labels=1,
-        id2label={0: "person"},
-        label2id={"person": 0},
-        num_queries=cfg.num_queries,
-        d_model=cfg.d_model,
-        encoder_layers=cfg.encoder_layers,
-        decoder_layers=cfg.decoder_layers,
-        encoder_attention_heads=cfg.attention_heads,
-        decoder_attention_heads=cfg.attention_heads,
-        encoder_ffn_dim=cfg.ffn_dim,
-        decoder_ffn_dim=cfg.ffn_dim,
-        dropout=cfg.dropout,
-        auxiliary_loss=cfg.auxiliary_loss,
-        dilation=cfg.dilation,
-        **extra,
-    )
+    return config_class(backbone_config=backbone, dilation=cfg.dilation, **_shared_config(cfg), **extra)
+
+
+def _shared_config(cfg: DetectorConfig) -> dict:
+    """The transformers config arguments that every arch takes from ``cfg`` alike."""
+    return {
+        "num_channels": cfg.num_channels,
+        "num_labels": 1,
+        "id2label": {0: "person"},
+        "label2id": {"person": 0},
+        "num_queries": cfg.num_queries,
+        "d_model": cfg.d_model,
+        "encoder_layers": cfg.encoder_layers,
+        "decoder_layers": cfg.decoder_layers,
+        "encoder_attention_heads": cfg.attention_heads,
+        "decoder_attention_heads": cfg.attention_heads,
+        "encoder_ffn_dim": cfg.ffn_dim,
+        "decoder_ffn_dim": cfg.ffn_dim,
+        "dropout": cfg.dropout,
+        "auxiliary_loss": cfg.auxiliary_loss,
+    }
 
 
 def _rt_detr_config(cfg: DetectorConfig, backbone: dict) -> RTDetrConfig:
@@ -199,26 +201,13 @@ def _rt_detr_config(cfg: DetectorConfig, backbone: dict) -> RTDetrConfig:
     ).feature_info
     return RTDetrConfig(
         backbone_config={**backbone, "out_indices": stages},
-        num_channels=cfg.num_channels,
-        num_labels=1,
-        id2label={0: "person"},
-        label2id={"person": 0},
         freeze_backbone_batch_norms=not cfg.trainable_norm,
         encoder_in_channels=info.channels(),
         feat_strides=info.reduction(),
         encoder_hidden_dim=cfg.d_model,
         decoder_in_channels=[cfg.d_model] * 3,
-        d_model=cfg.d_model,
-        encoder_layers=cfg.encoder_layers,
-        decoder_layers=cfg.decoder_layers,
-        encoder_attention_heads=cfg.attention_heads,
-        decoder_attention_heads=cfg.attention_heads,
-        encoder_ffn_dim=cfg.ffn_dim,
-        decoder_ffn_dim=cfg.ffn_dim,
-        num_queries=cfg.num_queries,
         num_denoising=cfg.num_queries,  # denoising queries: noised copies of the true boxes (DN-DETR)
-        dropout=cfg.dropout,
-        auxiliary_loss=cfg.auxiliary_loss,
+        **_shared_config(cfg),
     )
 
 
