@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torchvision.ops import nms
 
 from detector.boxes import clip_xyxy, cxcywh_norm_to_xyxy, scale_xyxy
 from detector.checkpoint import load_checkpoint
@@ -45,6 +46,7 @@ def decode(
     factors: Sequence[float],
     full_sizes: Sequence[tuple[int, int]],
     score_threshold: float,
+    nms_iou: float | None = None,
 ) -> list[Detections]:
     """DETR outputs to per-view detections in full-image pixels.
 
@@ -54,6 +56,7 @@ def decode(
         sizes: (width, height) of each resized view; ``factors`` the resize factor of each;
             ``full_sizes`` the (width, height) of each original view.
         score_threshold: keep queries whose person probability is at least this.
+        nms_iou: drop a box overlapping a higher-scored one by more than this IoU (None: no suppression).
     """
     if logits.shape[-1] == 1:  # Conditional DETR: one sigmoid (focal loss), no "no-object" class
         scores = logits[..., 0].sigmoid()
@@ -66,11 +69,11 @@ def decode(
         boxes = clip_xyxy(scale_xyxy(boxes, 1.0 / f), fw, fh)  # (Q, 4) full-image pixels
         keep = scores[b] >= score_threshold
         s, order = scores[b][keep].sort(descending=True)
-        out.append(
-            Detections(
-                boxes[keep][order].cpu().numpy().astype(np.float32), s.cpu().numpy().astype(np.float32)
-            )
-        )
+        kept = boxes[keep][order]
+        if nms_iou is not None and len(s):
+            survivors = nms(kept.float(), s.float(), nms_iou)  # indices, highest score first
+            kept, s = kept[survivors], s[survivors]
+        out.append(Detections(kept.cpu().numpy().astype(np.float32), s.cpu().numpy().astype(np.float32)))
     return out
 
 
@@ -117,7 +120,8 @@ class PersonDetector:
             images: V colour images ``(H, W, 3)`` uint8 RGB (None allowed for a depth-only detector).
             depths: V depth images ``(H, W)`` uint16 mm, or None; needed by ``depth``/``rgbd`` detectors.
             score_threshold: the lowest person probability kept (default: the checkpoint's
-                ``score_threshold``, chosen on training data).
+                ``score_threshold``, chosen on training data). Boxes then go through the checkpoint's
+                non-maximum suppression (``cfg.nms_iou``) when it has one.
         """
         if depths is None:
             if self.needs_depth:
@@ -138,4 +142,6 @@ class PersonDetector:
         pixels, mask, factors, sizes = prepare_views(images, depths, self.cfg)
         with torch.inference_mode():
             out = self.model(pixel_values=pixels.to(self.device), pixel_mask=mask.to(self.device))
-        return decode(out.logits, out.pred_boxes, sizes, factors, full_sizes, score_threshold)
+        return decode(
+            out.logits, out.pred_boxes, sizes, factors, full_sizes, score_threshold, self.cfg.nms_iou
+        )

@@ -83,6 +83,10 @@ class DetectorConfig:
     # Boxes scoring below this are dropped at inference (PersonDetector.detect's default). Choose it on training
     # data: ``detector.evaluate`` reports the F1-best threshold (F1_50_threshold).
     score_threshold: float = 0.5
+    # Non-maximum suppression at inference: drop a box that overlaps a higher-scored one by more than this IoU.
+    # None (the paper's DETR): none, set prediction is meant to give one box per person. A detector trained
+    # briefly from scratch still returns near-duplicates; ``detector.export`` chooses this on training days.
+    nms_iou: float | None = None
     pretrained: str | None = None  # local folder or hub id of real DETR weights (``paper``)
     freeze_stem: bool = False  # freeze stem + layer1 (the original DETR's choice for a pretrained backbone)
     # Normalisation of the inputs: ImageNet statistics for colour, metres around 2.5 m for depth.

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -67,10 +68,21 @@ def main(argv: list[str] | None = None) -> list[dict]:
     parser.add_argument("--out", required=True, help="COCO results json to write")
     parser.add_argument("--score-threshold", type=float, default=0.01, help="lowest person probability kept")
     parser.add_argument("--batch-size", type=int, default=6, help="views per forward pass")
+    nms = parser.add_mutually_exclusive_group()
+    nms.add_argument(
+        "--nms-iou",
+        type=float,
+        help="non-maximum suppression at this IoU (default: the checkpoint's setting)",
+    )
+    nms.add_argument(
+        "--no-nms", action="store_true", help="no non-maximum suppression, whatever the checkpoint says"
+    )
     parser.add_argument("--device", default="cpu")
     args = parser.parse_args(argv)
 
     detector = PersonDetector.from_checkpoint(args.checkpoint, args.device)
+    if args.no_nms or args.nms_iou is not None:
+        detector.cfg = replace(detector.cfg, nms_iou=None if args.no_nms else args.nms_iou)
     records = load_records(args.annotations, args.days)
     results = predict_records(detector, records, args.data, args.score_threshold, args.batch_size)
     out = Path(args.out)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 
 import pytest
 import torch
@@ -183,7 +184,11 @@ def test_export_sets_the_threshold_and_halves_the_file(dataset, tmp_path):
     assert chosen["days"] == [1] and meta["trained_on"] == "tiny ellipses"
     assert meta["detector"]["score_threshold"] == chosen["F1_50_threshold"]
     assert out.stat().st_size < 0.6 * (run / "model.safetensors").stat().st_size  # float16
+    # The suppression IoU was chosen on the same days, among none and the default choices.
+    assert set(chosen["nms_candidates"]) == {"none", "0.8", "0.7", "0.6", "0.5"}
+    assert meta["detector"]["nms_iou"] == chosen["nms_iou"]
     full, half = PersonDetector.from_checkpoint(run), PersonDetector.from_checkpoint(out)
+    full.cfg = replace(full.cfg, nms_iou=half.cfg.nms_iou)
     assert half.cfg.score_threshold == chosen["F1_50_threshold"]
     records = load_records(ann, [2])
     import cv2

@@ -192,3 +192,27 @@ def test_dense_loss_is_refused_for_rt_detr(dataset, tmp_path):
             ["--data", str(root), "--annotations", ann, "--holdout-day", "2", "--epochs", "1", "--no-progress",
              "--input-width", str(W), "--queries", "6", "--dense-weight", "1", "--out", str(tmp_path / "run")]
         )  # fmt: skip
+
+
+def test_nms_in_decode_and_on_coco_results():
+    from detector.export import nms_results
+
+    # Two queries on one person (IoU 0.9) and one on another; scores 0.9, 0.8, 0.7. Boxes are normalised
+    # (cx, cy, w, h) of a 100x100 view, shown at full size (factor 1).
+    boxes = torch.tensor([[[0.30, 0.5, 0.2, 0.6], [0.31, 0.5, 0.2, 0.6], [0.7, 0.5, 0.2, 0.6]]])
+    logits = torch.logit(torch.tensor([[[0.9], [0.8], [0.7]]]))
+    args = (logits, boxes, [(100, 100)], [1.0], [(100, 100)], 0.5)
+    plain, suppressed = decode(*args)[0], decode(*args, nms_iou=0.7)[0]
+    np.testing.assert_allclose(plain.scores, [0.9, 0.8, 0.7], atol=1e-6)
+    np.testing.assert_allclose(suppressed.scores, [0.9, 0.7], atol=1e-6)
+    np.testing.assert_array_equal(suppressed.boxes, plain.boxes[[0, 2]])
+    assert len(decode(*args, nms_iou=0.95)[0].scores) == 3  # IoU 0.9 < 0.95: both kept
+
+    results = [
+        {"image_id": 1, "bbox": [20, 20, 20, 60], "score": 0.9},
+        {"image_id": 1, "bbox": [21, 20, 20, 60], "score": 0.8},
+        {"image_id": 2, "bbox": [21, 20, 20, 60], "score": 0.8},  # another image: never suppressed by image 1
+    ]
+    assert nms_results(results, None) == results
+    assert [r["score"] for r in nms_results(results, 0.7)] == [0.9, 0.8]
+    assert sorted(r["image_id"] for r in nms_results(results, 0.7)) == [1, 2]
