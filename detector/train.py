@@ -248,12 +248,15 @@ def build_parser() -> argparse.ArgumentParser:
         "shipped detector on your own recordings, or train a finished run for longer",
     )
     g.add_argument(
-        "--input", choices=["rgb", "depth", "rgbd"], help="input channels (default: rgb, the paper)"
+        "--input",
+        choices=["rgb", "depth", "rgbd"],
+        help="input channels (default: the preset's; cpu: rgbd, paper: rgb as in the paper)",
     )
     g.add_argument(
         "--arch",
         choices=["detr", "conditional_detr", "rt_detr"],
-        help="detr (the paper's), conditional_detr or rt_detr (faster from scratch; docs/detector.md)",
+        help="default: the preset's (cpu: rt_detr, paper: detr). detr and conditional_detr read one backbone "
+        "stage: use them with --backbone-stage 3 for the small model (docs/detector.md)",
     )
     g.add_argument("--backbone", help="timm backbone name (e.g. resnet18, regnetx_002)")
     g.add_argument(
