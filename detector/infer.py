@@ -51,14 +51,14 @@ def decode(
     """DETR outputs to per-view detections in full-image pixels.
 
     Args:
-        logits: (B, Q, 2) class logits (person, no-object) of DETR, or (B, Q, 1) of Conditional DETR.
+        logits: (B, Q, 2) class logits (person, no-object) of DETR, or (B, Q, 1) of Conditional DETR / RT-DETR.
         pred_boxes: (B, Q, 4) normalised (cx, cy, w, h) of each view's resized, unpadded image.
         sizes: (width, height) of each resized view; ``factors`` the resize factor of each;
             ``full_sizes`` the (width, height) of each original view.
         score_threshold: keep queries whose person probability is at least this.
         nms_iou: drop a box overlapping a higher-scored one by more than this IoU (None: no suppression).
     """
-    if logits.shape[-1] == 1:  # Conditional DETR: one sigmoid (focal loss), no "no-object" class
+    if logits.shape[-1] == 1:  # Conditional DETR, RT-DETR: one sigmoid (focal loss), no "no-object" class
         scores = logits[..., 0].sigmoid()
     else:  # DETR: softmax over person and no-object, as DETR's post-processing
         scores = logits.softmax(-1)[..., 0]
