@@ -32,7 +32,7 @@ from detector.data import DetectionDataset, collate, load_annotation_file, load_
 from detector.dense import DenseLoss
 from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
-from detector.model import DetectorConfig, build_detector, param_groups, preset
+from detector.model import ARCHS, DetectorConfig, build_detector, param_groups, preset
 from detector.predict import predict_records
 
 
@@ -254,7 +254,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument(
         "--arch",
-        choices=["detr", "conditional_detr", "rt_detr"],
+        choices=sorted(ARCHS),
         help="default: the preset's (cpu: rt_detr, paper: detr). detr and conditional_detr read one backbone "
         "stage: use them with --backbone-stage 3 for the small model (docs/detector.md)",
     )
@@ -348,6 +348,12 @@ def main(argv: list[str] | None = None) -> list[dict]:
             r.root = str(extra)
         records += extra_records
 
+    trained_on = {
+        "data": str(args.data),
+        "days": train_days,
+        "extra_data": [str(e) for e in args.extra_data],
+        "views": len(records),
+    }
     if args.resume and (out / "config.json").is_file():
         model, det_cfg, _ = load_checkpoint(out)
         model.train()
@@ -370,10 +376,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         det_cfg.extra["trained_on"] = {
             "init": str(args.init),
             "init_trained_on": det_cfg.extra.get("trained_on"),
-            "data": str(args.data),
-            "days": train_days,
-            "extra_data": [str(e) for e in args.extra_data],
-            "views": len(records),
+            **trained_on,
         }
     else:
         det_cfg = preset(
@@ -386,12 +389,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             input_width=args.input_width,
             backbone_stage=args.backbone_stage,
         )
-        det_cfg.extra["trained_on"] = {
-            "data": str(args.data),
-            "days": train_days,
-            "extra_data": [str(e) for e in args.extra_data],
-            "views": len(records),
-        }
+        det_cfg.extra["trained_on"] = trained_on
         torch.manual_seed(cfg.seed)
         model = build_detector(det_cfg)
     train_set = DetectionDataset(records, args.data, det_cfg, cfg.augment, seed=cfg.seed, cache=cfg.cache)

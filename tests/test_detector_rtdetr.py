@@ -10,7 +10,13 @@ import torch
 
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
-from test_detector_train import W, few_steps, tiny_cpu_cfg, write_dataset  # noqa: E402
+from test_detector_train import (  # noqa: E402, F401 (one_thread: the same autouse fixture here)
+    W,
+    few_steps,
+    one_thread,
+    tiny_cpu_cfg,
+    write_dataset,
+)
 
 from detector import train as train_cli  # noqa: E402
 from detector.checkpoint import load_checkpoint, read_config  # noqa: E402
@@ -18,14 +24,6 @@ from detector.data import DetectionDataset, load_records, read_record  # noqa: E
 from detector.infer import PersonDetector, decode  # noqa: E402
 from detector.inputs import batch_inputs, box_frame, prepare_views  # noqa: E402
 from detector.model import build_detector  # noqa: E402
-
-
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 @pytest.fixture(scope="module")
