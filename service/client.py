@@ -19,6 +19,7 @@ id whose boxes it overlaps most (mean IoU over the views, as in the paper).
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
 import os
 import random
@@ -185,9 +186,28 @@ def predictions(lines: dict[str, dict], dataset: MvorDataset) -> list[dict]:
 
 
 # ----------------------------------------------------------------------------------------------- main
+def lock_output(f, path: Path) -> None:
+    """Hold an exclusive lock on the open output file ``f`` until it is closed, or exit with a message.
+
+    Two clients appending to one file would interleave their lines and post the same frames twice. The lock
+    is ``flock`` (advisory, released by the kernel when the process dies), so a killed run never leaves a
+    stale lock behind.
+    """
+    try:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        f.close()
+        raise SystemExit(
+            f"error: {path} is in use by another batch client (it holds a lock on the file); wait for that "
+            "run to finish, or give this one another --out"
+        ) from None
+
+
 def run(dataset: MvorDataset, root: Path, out: Path, cfg: ClientConfig) -> dict:
     """Post every frame not yet in ``out``; returns the counts of the run."""
-    done = read_done(out)
+    f = open(out, "a")  # closed by the with block below; the lock lasts as long
+    lock_output(f, out)
+    done = read_done(out)  # only once the lock is held: it may truncate a torn last line
     todo = [i for i, frame_id in enumerate(dataset.ids) if frame_id not in done]
     counts = {
         "frames": len(dataset),
@@ -201,7 +221,7 @@ def run(dataset: MvorDataset, root: Path, out: Path, cfg: ClientConfig) -> dict:
     with (
         httpx.Client(base_url=cfg.url, limits=limits) as client,
         ThreadPoolExecutor(cfg.concurrency) as pool,
-        open(out, "a") as f,
+        f,
         tqdm(total=len(todo), desc="frames", unit="frame", dynamic_ncols=True) as bar,
     ):
         futures = {pool.submit(post_frame, client, dataset[i], root, cfg): dataset.ids[i] for i in todo}

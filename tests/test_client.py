@@ -18,7 +18,7 @@ from service_harness import REPO_ROOT, Server, free_port, tiny_checkpoints
 
 from posenet.data.mvor import MvorDataset
 from service.association import assign, mean_view_iou
-from service.client import ClientConfig, append_line, predictions, read_done, run
+from service.client import ClientConfig, append_line, lock_output, predictions, read_done, run
 
 
 def test_read_done_drops_a_torn_last_line_and_appends_cleanly(tmp_path):
@@ -122,3 +122,15 @@ def test_unreachable_server_and_missing_files_are_failures_not_lines(tiny_mvor_d
     counts = run(ds, data.root, out, cfg)
     assert counts["gave_up"] == len(ds) and counts["ok"] == counts["rejected"] == 0
     assert read_done(out) == {}  # a later run retries every frame
+
+
+def test_a_second_client_on_the_same_output_file_refuses(tiny_mvor_dataset, tmp_path):
+    # The first client holds the lock for as long as it writes; the second opens the file afresh, as another
+    # process would, and cannot take it.
+    out = tmp_path / "results.jsonl"
+    dataset = MvorDataset(None, tiny_mvor_dataset.gt)
+    with open(out, "a") as first:
+        lock_output(first, out)
+        with pytest.raises(SystemExit, match=f"{out} is in use by another batch client"):
+            run(dataset, tiny_mvor_dataset.root, out, ClientConfig(url="http://127.0.0.1:9"))
+    assert out.read_text() == ""  # the refused client wrote nothing and posted nothing
