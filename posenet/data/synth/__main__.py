@@ -95,9 +95,27 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
     )
 
 
+MVOR_HELP = (
+    "MVOR's annotation file camma_mvor_2018.json (CC BY-NC-SA 4.0, Srivastav et al., MICCAI-LABELS 2018) "
+    "holds the real rig; get it from the MVOR repository, https://github.com/CAMMA-public/MVOR, and pass "
+    "its path with {flag} (or set $MVOR_ANNOTATIONS). Without it, --rig random renders procedural scenes "
+    "on random rigs."
+)
+
+
+def _require_mvor(path: str | None, flag: str) -> None:
+    """Exit with where to get MVOR's annotation file when ``path`` is not a file."""
+    if not path or not Path(path).is_file():
+        raise SystemExit(f"error: MVOR annotation file not found: {path!r}. " + MVOR_HELP.format(flag=flag))
+
+
 def main(argv: list[str] | None = None) -> dict:
     args = build_parser().parse_args(argv)
     cfg = config_from_args(args)
+    if cfg.mode == "twin":
+        _require_mvor(cfg.mvor_annotations, "--from-mvor")
+    elif cfg.rig == "mvor":
+        _require_mvor(cfg.mvor_annotations, "--mvor-annotations")
     summary = generate(cfg, progress=not args.quiet)
     with open(Path(cfg.out) / "synth_config.json", "w") as f:
         json.dump({"config": asdict(cfg), "summary": summary}, f, indent=2)
