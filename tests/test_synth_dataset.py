@@ -101,8 +101,10 @@ def test_workers_do_not_change_the_output(tmp_path):
 def test_bad_arguments_fail_clearly(tmp_path):
     with pytest.raises(SystemExit):
         main(["--out", str(tmp_path), "--quiet"])
-    with pytest.raises(FileNotFoundError, match="MVOR annotation file"):
+    with pytest.raises(SystemExit, match="MVOR annotation file not found"):
         main(["--out", str(tmp_path), "--scenes", "1", "--rig", "mvor", "--mvor-annotations", "/nope.json"])
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path), "--scenes", "1", "--look", "shiny"])
 
 
 @pytest.mark.skipif(not MVOR_JSON.is_file(), reason=f"MVOR annotations not found at {MVOR_JSON}")

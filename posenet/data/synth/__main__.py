@@ -7,6 +7,8 @@ Procedural scenes seen by MVOR's real rig:
 The MVOR twin (all 732 real frames, real rig, real 3D poses):
     python -m posenet.data.synth --out data/mvor_twin --from-mvor ../shared/mvor/camma_mvor_2018.json
     --workers 2
+The unseen-look test set (the same frames, another renderer's look; never train on it):
+    python -m posenet.data.synth --out data/mvor_alt --from-mvor ../shared/mvor/camma_mvor_2018.json --look alt
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
+from posenet.data.synth.looks import LOOKS
 from posenet.data.synth.writer import SynthConfig, generate
 
 DEFAULT_MVOR = Path(__file__).resolve().parents[3] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
@@ -63,6 +66,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--seed", type=int, default=0, help="same seed, same bytes (per-frame seeds from seed/day/frame)"
     )
+    p.add_argument(
+        "--look",
+        choices=LOOKS,
+        default=None,
+        help="twin: the renderer's original look; random: bodies, clothing, light, camera, depth sensor and "
+        "occluders drawn per scene and person (to train on); alt: one fixed other look, never trained on "
+        "(default: random for --scenes, twin for --from-mvor, whose numbers it reproduces)",
+    )
     p.add_argument("--workers", type=int, default=1, help="frames rendered in parallel processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -81,6 +92,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
             mvor_annotations=args.from_mvor,
             limit=args.limit,
             stride=args.stride,
+            look=args.look or "twin",
         )
     return SynthConfig(
         out=args.out,
@@ -92,6 +104,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
         seed=args.seed,
         workers=args.workers,
         mvor_annotations=args.mvor_annotations if args.rig == "mvor" else None,
+        look=args.look or "random",
     )
 
 

@@ -4,7 +4,9 @@
 twenty capsules, round cones and ellipsoids: head, cap, mask, neck, shoulders, chest, belly, pelvis, arms,
 gloved hands, thighs, shins and shoes (limbs taper from joint to joint), plus a gown skirt or a lead apron
 when the outfit has one. Thicknesses scale with the stature (trunk length); colours come from an
-:class:`Outfit` drawn by :func:`sample_outfit`.
+:class:`Outfit` drawn by :func:`sample_outfit`. Every size, and where the annotated joints sit inside the
+body, is a field of :class:`BodyShape`, whose defaults are the ``twin`` look's body; the ``random`` look draws
+them per person (:mod:`posenet.data.synth.looks`).
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ class Outfit:
 
     top: Material
     trousers: Material
-    cap: Material
+    cap: Material | None  # None: bare head (hair, if any)
     mask: Material | None
     skin: Material
     hands: Material  # gloves, or skin
@@ -60,6 +62,52 @@ class Outfit:
     gown: bool = False  # a long gown over the scrubs (the skirt covers the thighs)
     apron: Material | None = None  # a lead apron in front of the trunk
     bulk: float = 1.0  # how loose the clothing is (scales the thicknesses)
+    hair: Material | None = None  # drawn where a cap does not cover it
+    hair_bun: bool = False  # a bun at the back of the head
+    hood: bool = False  # a surgical hood: the cap reaches down over the neck
+
+
+@dataclass(frozen=True)
+class BodyShape:
+    """Sizes of one body, in mm at the reference stature (they scale with it), and where its annotated joints
+    sit inside it. The defaults are the ``twin`` look's body.
+
+    ``offsets (NUM_FULL, 3)``: per skeleton point, how far the anatomical joint that the flesh is built on
+    lies from the annotated point, in the trunk's frame (forward, outward for the point's side, up); None
+    means the flesh is built on the annotated points.
+    """
+
+    head: float = 1.0  # skull size factor
+    head_out: float = 1.3  # skull centre along neck->head, in units of that distance
+    head_back: float = 10.0  # and this far behind the face
+    neck: float = 50.0
+    shoulder: float = 62.0  # radius of the shoulder bar
+    shoulder_drop: float = 15.0  # the bar hangs this far below the shoulder points
+    chest_side: float = 40.0  # beyond half the shoulder width
+    chest_depth: float = 105.0
+    chest_height: float = 0.42  # half height, share of the trunk
+    belly_side: float = 30.0  # beyond half the hip width
+    belly_depth: float = 98.0
+    belly_height: float = 0.36
+    belly: float = 0.0  # > 0: a paunch this deep in front of the belly
+    pelvis_side: float = 55.0
+    pelvis_depth: float = 105.0
+    pelvis_height: float = 125.0
+    arm: tuple[float, float, float, float] = (52.0, 40.0, 39.0, 29.0)  # upper arm ends, forearm ends
+    hand: float = 34.0
+    leg: tuple[float, float, float, float] = (82.0, 56.0, 54.0, 38.0)  # thigh ends, shin ends
+    shoe: float = 42.0
+    skirt_side: float = 110.0  # gown skirt, beyond half the hip width
+    skirt_depth: float = 150.0
+    skirt_extra: float = 60.0  # reaches this far below the knees
+    apron_side: float = 60.0
+    apron_depth: float = 95.0
+    apron_height: float = 0.75
+    offsets: np.ndarray | None = None
+    model: str = "twin"  # "alt": the alt look's own body model (posenet.data.synth.body_alt)
+
+
+TWIN_SHAPE = BodyShape()
 
 
 def _cloth(rgb: np.ndarray, rng: np.random.Generator, texture: float = 0.05) -> Material:
@@ -109,10 +157,24 @@ def sample_outfit(rng: np.random.Generator, role: str = "clinician") -> Outfit:
     )
 
 
-def body_primitives(points: np.ndarray, outfit: Outfit, owner: int) -> list[Primitive]:
-    """Primitives of one person from a full skeleton ``(NUM_FULL, 3)`` (z-up world frame, mm)."""
-    P = {name: points[i] for name, i in F.items()}
+def anatomical_points(points: np.ndarray, offsets: np.ndarray | None) -> np.ndarray:
+    """The skeleton that the flesh is built on: ``points (NUM_FULL, 3)`` moved by ``offsets (NUM_FULL, 3)``
+    (forward, outward, up in the trunk's frame; see :class:`BodyShape`)."""
+    if offsets is None:
+        return points
     fwd, left, up = body_frame(points)
+    side = np.array([1.0 if n.startswith("left") else -1.0 if n.startswith("right") else 0.0 for n in F])
+    return points + offsets[:, :1] * fwd + (offsets[:, 1:2] * side[:, None]) * left + offsets[:, 2:] * up
+
+
+def body_primitives(
+    points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape = TWIN_SHAPE
+) -> list[Primitive]:
+    """Primitives of one person from a full skeleton ``(NUM_FULL, 3)`` (z-up world frame, mm)."""
+    b = shape
+    fwd, left, up = body_frame(points)
+    points = anatomical_points(points, b.offsets)
+    P = {name: points[i] for name, i in F.items()}
     mid_sh = (P["left_shoulder"] + P["right_shoulder"]) / 2
     mid_hip = (P["left_hip"] + P["right_hip"]) / 2
     trunk = float(np.linalg.norm(mid_sh - mid_hip))
@@ -138,59 +200,87 @@ def body_primitives(points: np.ndarray, outfit: Outfit, owner: int) -> list[Prim
     hd = unit(P["head"] - P["neck"])
     hf = unit(fwd - hd * (fwd @ hd))
     hl = np.cross(hd, hf)
-    head_c = P["neck"] + hd * 1.3 * np.linalg.norm(P["head"] - P["neck"]) - hf * 10 * s
-    ell(head_c, np.array([72, 90, 108]) * s, (hl, hf, hd), outfit.skin)
-    ell(head_c + hd * 30 * s - hf * 12 * s, np.array([80, 96, 84]) * s, (hl, hf, hd), outfit.cap)
+    hs = s * b.head
+    head_c = P["neck"] + hd * b.head_out * np.linalg.norm(P["head"] - P["neck"]) - hf * b.head_back * s
+    ell(head_c, np.array([72, 90, 108]) * hs, (hl, hf, hd), outfit.skin)
+    if outfit.hair is not None:  # under the cap only the back of the head shows
+        ell(head_c + hd * 12 * hs - hf * 14 * hs, np.array([76, 88, 100]) * hs, (hl, hf, hd), outfit.hair)
+        if outfit.hair_bun:
+            ell(head_c - hf * 95 * hs + hd * 10 * hs, np.array([40, 36, 40]) * hs, (hl, hf, hd), outfit.hair)
+    if outfit.cap is not None:
+        ell(head_c + hd * 30 * hs - hf * 12 * hs, np.array([80, 96, 84]) * hs, (hl, hf, hd), outfit.cap)
+        if outfit.hood:  # down the back and the sides of the neck
+            ell(head_c - hd * 70 * hs - hf * 20 * hs, np.array([82, 80, 90]) * hs, (hl, hf, hd), outfit.cap)
     if outfit.mask is not None:
-        ell(head_c + hf * 62 * s - hd * 38 * s, np.array([58, 36, 46]) * s, (hl, hf, hd), outfit.mask)
-    cap_(P["neck"] - up * 20 * s, head_c - hd * 40 * s, 50 * s, outfit.skin)
+        ell(head_c + hf * 62 * hs - hd * 38 * hs, np.array([58, 36, 46]) * hs, (hl, hf, hd), outfit.mask)
+    cap_(P["neck"] - up * 20 * s, head_c - hd * 40 * hs, b.neck * s, outfit.skin)
     # Trunk: shoulder bar, chest, belly and pelvis ellipsoids in the trunk's frame.
-    cap_(P["left_shoulder"] - up * 15 * s, P["right_shoulder"] - up * 15 * s, 62 * k, outfit.top)
+    drop = up * b.shoulder_drop * s
+    cap_(P["left_shoulder"] - drop, P["right_shoulder"] - drop, b.shoulder * k, outfit.top)
     axes = (left, fwd, up)
     ell(
         mid_hip + (mid_sh - mid_hip) * 0.68,
-        np.array([sh_w / 2 + 40 * k, 105 * k, 0.42 * trunk]),
+        np.array([sh_w / 2 + b.chest_side * k, b.chest_depth * k, b.chest_height * trunk]),
         axes,
         outfit.top,
     )
     ell(
         mid_hip + (mid_sh - mid_hip) * 0.32,
-        np.array([hip_w / 2 + 30 * k, 98 * k, 0.36 * trunk]),
+        np.array([hip_w / 2 + b.belly_side * k, b.belly_depth * k, b.belly_height * trunk]),
         axes,
         outfit.top,
     )
-    ell(mid_hip - up * 15 * s, np.array([hip_w / 2 + 55 * k, 105 * k, 125 * s]), axes, outfit.trousers)
+    if b.belly > 0:
+        ell(
+            mid_hip + (mid_sh - mid_hip) * 0.3 + fwd * (b.belly_depth * k + b.belly - 120 * s),
+            np.array([hip_w / 2, 120 * s, 0.3 * trunk]),
+            axes,
+            outfit.apron if outfit.apron is not None else outfit.top,
+        )
+    ell(
+        mid_hip - up * 15 * s,
+        np.array([hip_w / 2 + b.pelvis_side * k, b.pelvis_depth * k, b.pelvis_height * s]),
+        axes,
+        outfit.trousers,
+    )
     if outfit.apron is not None:
         ell(
             mid_hip + (mid_sh - mid_hip) * 0.45 + fwd * 45 * k - up * 60 * s,
-            np.array([sh_w / 2 + 60 * k, 95 * k, 0.75 * trunk]),
+            np.array([sh_w / 2 + b.apron_side * k, b.apron_depth * k, b.apron_height * trunk]),
             axes,
             outfit.apron,
         )
     # Arms and hands.
+    ua, ub, fa, fb = b.arm
     for side in ("left", "right"):
-        limb(P[f"{side}_shoulder"], P[f"{side}_elbow"], 52 * k, 40 * k, outfit.top)
+        limb(P[f"{side}_shoulder"], P[f"{side}_elbow"], ua * k, ub * k, outfit.top)
         limb(
-            P[f"{side}_elbow"], P[f"{side}_wrist"], 39 * k, 29 * k, outfit.top if outfit.gown else outfit.skin
+            P[f"{side}_elbow"], P[f"{side}_wrist"], fa * k, fb * k, outfit.top if outfit.gown else outfit.skin
         )
         hand_dir = unit(P[f"{side}_hand"] - P[f"{side}_wrist"])
         cap_(
             P[f"{side}_wrist"] + hand_dir * 15 * s,
             P[f"{side}_hand"] + hand_dir * 20 * s,
-            34 * s,
+            b.hand * s,
             outfit.hands,
         )
     # Legs and shoes.
+    ta, tb, sa, sb = b.leg
     for side in ("left", "right"):
-        limb(P[f"{side}_hip"], P[f"{side}_knee"], 82 * k, 56 * k, outfit.trousers)
-        limb(P[f"{side}_knee"], P[f"{side}_ankle"], 54 * k, 38 * k, outfit.trousers)
-        cap_(P[f"{side}_ankle"] - up * 25 * s, P[f"{side}_toe"], 42 * s, outfit.shoes)
+        limb(P[f"{side}_hip"], P[f"{side}_knee"], ta * k, tb * k, outfit.trousers)
+        limb(P[f"{side}_knee"], P[f"{side}_ankle"], sa * k, sb * k, outfit.trousers)
+        cap_(P[f"{side}_ankle"] - up * 25 * s, P[f"{side}_toe"], b.shoe * s, outfit.shoes)
     if outfit.gown:  # a gown skirt down to the knees
         knees = (P["left_knee"] + P["right_knee"]) / 2
         c = (mid_hip + knees) / 2
         ax_up = unit(mid_hip - knees)
         ax_l = unit(left - ax_up * (left @ ax_up))
         ax_f = np.cross(ax_l, ax_up)
-        half = float(np.linalg.norm(mid_hip - knees)) / 2 + 60 * s
-        ell(c, np.array([hip_w / 2 + 110 * k, 150 * k, half]), (ax_l, ax_f, ax_up), outfit.top)
+        half = float(np.linalg.norm(mid_hip - knees)) / 2 + b.skirt_extra * s
+        ell(
+            c,
+            np.array([hip_w / 2 + b.skirt_side * k, b.skirt_depth * k, half]),
+            (ax_l, ax_f, ax_up),
+            outfit.top,
+        )
     return out

@@ -13,6 +13,8 @@ projected joints, padded by the body's thickness, best fit the boxes it came fro
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from posenet.data.synth.body import sample_outfit
@@ -89,8 +91,11 @@ def add_bystanders(
     must_show: set[tuple[int, int]],
     room: tuple[np.ndarray, np.ndarray],
     rng: np.random.Generator,
+    dress: Callable[[Person], None] | None = None,
 ) -> dict[str, int]:
-    """Append bystanders for ``boxes`` [(view, xyxy)] to ``frame.persons``; returns counts added / dropped."""
+    """Append bystanders for ``boxes`` [(view, xyxy)] to ``frame.persons``; returns counts added / dropped.
+
+    ``dress`` (a look's :meth:`~posenet.data.synth.looks.Look.dress`) re-dresses each new bystander."""
     stats = {"bystanders": 0, "bystanders_dropped": 0}
     found = [(v, xy, b) for v, b in boxes if (xy := floor_position(rig, v, b)) is not None]
     if not found:
@@ -113,6 +118,8 @@ def add_bystanders(
             stats["bystanders_dropped"] += 1
             continue
         frame.persons.append(Person(points, sample_outfit(rng), -1))
+        if dress is not None:
+            dress(frame.persons[-1])
         pelvis.append(xy)
     if len(frame.persons) == first:
         return stats

@@ -13,11 +13,18 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from posenet.data.synth.body import Outfit, body_primitives
+from posenet.data.synth.body import TWIN_SHAPE, BodyShape, Outfit, body_primitives
+from posenet.data.synth.body_alt import alt_body_primitives
 from posenet.data.synth.primitives import Primitive
 from posenet.data.synth.raster import Intrinsics, rasterize
 from posenet.data.synth.rig import Rig
-from posenet.data.synth.sensor import Lighting, shade_colour, simulate_depth
+from posenet.data.synth.sensor import (
+    ColourSensorConfig,
+    DepthSensorConfig,
+    Lighting,
+    shade_colour,
+    simulate_depth,
+)
 
 NUM_JOINTS_2D = 10
 
@@ -33,6 +40,8 @@ class Person:
         patient).
         role: ``"clinician"`` or ``"patient"``.
         extra: further primitives that belong to this person's silhouette (the patient's drape).
+        shape: body sizes and joint placement (the twin look's by default; see
+        :mod:`posenet.data.synth.looks`).
     """
 
     points: np.ndarray
@@ -40,6 +49,7 @@ class Person:
     person_id: int
     role: str = "clinician"
     extra: list[Primitive] = field(default_factory=list)
+    shape: BodyShape = TWIN_SHAPE
 
 
 @dataclass
@@ -49,12 +59,15 @@ class Frame:
     Attributes:
         hidden: (view, person index) pairs in which the person is not drawn at all (a last resort of the
         twin).
+        look: the sensors and material gains of the frame's look
+        (:class:`~posenet.data.synth.looks.SceneLook`); None is the twin look.
     """
 
     persons: list[Person]
     room: list[Primitive]
     lighting: Lighting
     hidden: set[tuple[int, int]] = field(default_factory=set)
+    look: object | None = None
 
 
 @dataclass
@@ -93,18 +106,26 @@ def frame_primitives(frame: Frame) -> list[Primitive]:
     """All primitives of a frame, the persons' owned by their index."""
     prims = list(frame.room)
     for i, person in enumerate(frame.persons):
-        prims += body_primitives(person.points, person.outfit, i)
+        build = alt_body_primitives if person.shape.model == "alt" else body_primitives
+        prims += build(person.points, person.outfit, i, person.shape)
         prims += [replace(p, owner=i) for p in person.extra]
     return prims
 
 
-def _material_tables(prims: list[Primitive]) -> tuple[np.ndarray, ...]:
+def _material_tables(prims: list[Primitive], look=None) -> tuple[np.ndarray, ...]:
+    """Per primitive: albedo (N, 3), depth dropout, texture, specular, owner (look: a ``SceneLook``)."""
+    depth_cfg = look.depth if look is not None else DepthSensorConfig()
+    owner = np.array([p.owner for p in prims], np.int32)
     albedo = np.array([p.material.albedo for p in prims], np.float32)
+    if look is not None and look.room_gain is not None:
+        albedo[owner < 0] = np.clip(albedo[owner < 0] * np.asarray(look.room_gain, np.float32), 0, 1)
     dropout = np.array([p.material.ir_dropout for p in prims], np.float32)
-    dropout = dropout + np.clip(0.08 - albedo.mean(1), 0, None) * 4  # very dark cloth absorbs the IR pattern
+    # Very dark cloth absorbs the IR pattern.
+    dropout = dropout + np.clip(depth_cfg.dark_threshold - albedo.mean(1), 0, None) * depth_cfg.dark_absorb
+    if look is not None and look.dropout_gain != 1.0:
+        dropout = dropout * look.dropout_gain
     texture = np.array([p.material.texture for p in prims], np.float32)
     specular = np.array([p.material.specular for p in prims], np.float32)
-    owner = np.array([p.owner for p in prims], np.int32)
     return albedo, dropout, texture, specular, owner
 
 
@@ -162,12 +183,23 @@ def render_view(
     keep = [p for p in prims if (v, p.owner) not in frame.hidden]
     cam = [p.to_camera(T) for p in keep]
     g = rasterize(cam, K)
-    albedo, dropout, texture, specular, owners = _material_tables(keep)
+    look = frame.look
+    albedo, dropout, texture, specular, owners = _material_tables(keep, look)
     hit = g.prim >= 0
     idx = np.where(hit, g.prim, 0)
     owner = np.where(hit, owners[idx], -3)
-    depth = simulate_depth(g, K, np.where(hit, dropout[idx], 0), rng)
-    color = shade_colour(g, K, albedo[idx], texture[idx], specular[idx], T, frame.lighting, rng)
+    if look is None:  # the twin look
+        depth = simulate_depth(g, K, np.where(hit, dropout[idx], 0), rng)
+        color = shade_colour(g, K, albedo[idx], texture[idx], specular[idx], T, frame.lighting, rng)
+    else:
+        depth_cfg: DepthSensorConfig = look.depth
+        colour_cfg: ColourSensorConfig = look.colour
+        depth = simulate_depth(
+            g, K, np.where(hit, dropout[idx], 0), rng, depth_cfg, albedo[idx], specular[idx], owner
+        )
+        color = shade_colour(
+            g, K, albedo[idx], texture[idx], specular[idx], T, frame.lighting, rng, colour_cfg
+        )
 
     n = len(frame.persons)
     counts = np.bincount(owner[owner >= 0].ravel(), minlength=n)

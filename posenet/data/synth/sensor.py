@@ -11,6 +11,12 @@ Colour (uint8 RGB): Lambertian shading from a key light above, a fill light and 
 highlights on metal and screens, per-frame exposure and white balance, vignetting, fabric texture, sensor
 shot and read noise and a slight blur. Colour is deliberately harder than depth: exposure, white balance and
 noise change from frame to frame, while the depth of a surface does not.
+
+The defaults of :class:`DepthSensorConfig`, :class:`ColourSensorConfig` and :class:`Lighting` are the ``twin``
+look; the other looks (:mod:`posenet.data.synth.looks`) set the further options: flying pixels, clustered and
+specular holes, multipath near walls, a time-of-flight model (noise linear in z and growing on dark surfaces,
+no projector shadows, a circular field of view), more lights, another diffuse model and tone curve, JPEG.
+Every option is off at its default, so the twin's images, random draws included, stay byte for byte the same.
 """
 
 from __future__ import annotations
@@ -36,6 +42,23 @@ class DepthSensorConfig:
     edge_dropout: float = 0.6
     speckle: float = 0.004
     left_band: int = 8  # invalid columns on the left border
+    # Options of the other looks (off here; see the module docstring).
+    model: str = "structured_light"  # or "tof": no projector shadows, noise from noise_const/noise_lin
+    white: float = 0.7  # weight of the white part of the noise
+    wobble: float = 0.7  # weight of the smooth part
+    noise_const: float = 0.0  # mm, added to sigma
+    noise_lin: float = 0.0  # sigma grows by this many mm per mm of z
+    dark_noise: float = 0.0  # sigma *= 1 + dark_noise * (1 - albedo brightness): weak returns are noisier
+    dark_absorb: float = 4.0  # surface dropout += dark_absorb * max(dark_threshold - albedo brightness, 0)
+    dark_threshold: float = 0.08
+    projector_side: int = 1  # +1: projector to the right of the IR camera (shadows left of objects), -1 left
+    quantisation: str = "disparity"  # or "mm": steps of quant_mm along z
+    quant_mm: float = 1.0
+    flying: float = 0.0  # share of the depth-edge pixels left by edge_dropout that get a mixed depth
+    blob_holes: float = 0.0  # area share of clustered holes (smooth random field over a threshold)
+    specular_holes: float = 0.0  # dropout on shiny surfaces seen head-on (saturated returns)
+    multipath: float = 0.0  # walls: depth += multipath * how far the pixel lies behind its neighbourhood
+    fov_radius: float = 0.0  # > 0: pixels further than this share of the half diagonal are invalid
 
 
 @dataclass
@@ -44,6 +67,12 @@ class ColourSensorConfig:
     shot_noise: float = 0.025  # relative, sigma at full scale
     blur_sigma: float = 0.7
     vignetting: float = 0.25
+    # Options of the other looks.
+    gamma: float = 2.2
+    diffuse: str = "lambert"  # or "half_lambert" ((n.l / 2 + 1 / 2)^2, wrapping light round the body)
+    hemisphere: float = 0.0  # ambient from above brighter than from below: ambient * (1 + h * n.up)
+    tonemap: str = "clip"  # or "reinhard": x (1 + x / w^2) / (1 + x) with w = 1.6
+    jpeg_quality: int = 0  # > 0: the image goes through a JPEG round trip at this quality
 
 
 def simulate_depth(
@@ -52,43 +81,91 @@ def simulate_depth(
     dropout: np.ndarray,
     rng: np.random.Generator,
     cfg: DepthSensorConfig | None = None,
+    albedo: np.ndarray | None = None,
+    specular: np.ndarray | None = None,
+    owner: np.ndarray | None = None,
 ) -> np.ndarray:
     """Sensor depth ``(H, W)`` uint16 mm from a G-buffer; ``dropout (H, W)`` is the per-pixel surface
-    dropout."""
+    dropout. ``albedo (H, W, 3)``, ``specular (H, W)`` and ``owner (H, W)`` (negative: room) feed the options
+    that need them (dark-surface noise, specular holes, multipath)."""
     cfg = cfg or DepthSensorConfig()
     z = g.depth.copy()
     H, W = z.shape
     valid = np.isfinite(z) & (z > cfg.min_range) & (z < cfg.max_range)
     z[~valid] = cfg.max_range
-    # Projector shadows: a z-buffer seen from the projector, one row at a time (same row, shifted column).
     fb = K.fx * cfg.baseline
-    up = np.round(np.arange(W)[None, :] + fb / z).astype(np.int64)  # projector column of every pixel
-    up = np.clip(up, 0, W + int(fb / cfg.min_range) + 1)
-    Wp = W + int(fb / cfg.min_range) + 2
-    key = (np.arange(H)[:, None] * Wp + up).ravel()
-    proj = np.full(H * Wp, np.inf)
-    np.minimum.at(proj, key[valid.ravel()], z.ravel()[valid.ravel()])
-    shadow = z > proj[key].reshape(H, W) * 1.03
+    if cfg.model == "tof":  # the emitter sits at the lens: no projector shadows
+        shadow = np.zeros((H, W), bool)
+    elif cfg.projector_side < 0:  # the mirror image of a projector on the right
+        shadow = projector_shadow(z[:, ::-1], valid[:, ::-1], fb, cfg.min_range)[:, ::-1]
+    else:
+        shadow = projector_shadow(z, valid, fb, cfg.min_range)
     # Mixed pixels at depth discontinuities.
     zmax = cv2.dilate(z.astype(np.float32), np.ones((3, 3), np.uint8))
     zmin = cv2.erode(z.astype(np.float32), np.ones((3, 3), np.uint8))
     edge = (zmax - zmin) > cfg.edge_jump * z
     far = np.clip((z - cfg.far_dropout_start) / (cfg.max_range - cfg.far_dropout_start), 0, 1)
+    if cfg.specular_holes > 0 and specular is not None:  # shiny surfaces facing the camera saturate
+        dropout = dropout + cfg.specular_holes * specular * np.clip(-g.normal[2], 0, 1) ** 8
     p_hole = edge * cfg.edge_dropout + dropout + cfg.speckle + far * 0.7  # one draw for every random cause
-    holes = shadow | (rng.random((H, W), dtype=np.float32) < p_hole)
+    draw = rng.random((H, W), dtype=np.float32)
+    holes = shadow | (draw < p_hole)
+    if cfg.blob_holes > 0:  # clustered dropouts: a smooth random field above its (1 - blob_holes) quantile
+        blob = cv2.resize(
+            rng.standard_normal((H // 12, W // 12), dtype=np.float32), (W, H), interpolation=cv2.INTER_CUBIC
+        )
+        holes |= blob > np.quantile(blob[::8, ::8], 1 - cfg.blob_holes)
     # Noise: white, plus a smooth wobble of the same order (structured light correlates neighbouring pixels).
     sigma = cfg.noise_k * z * z
+    if cfg.noise_const or cfg.noise_lin:
+        sigma = sigma + cfg.noise_const + cfg.noise_lin * z
+    if cfg.dark_noise > 0 and albedo is not None:
+        sigma = sigma * (1 + cfg.dark_noise * np.clip(1 - albedo.mean(-1) * 2, 0, 1))
     wobble = cv2.resize(
         rng.normal(0, 1, (H // 16, W // 16)).astype(np.float32), (W, H), interpolation=cv2.INTER_CUBIC
     )
-    zn = z + sigma * (noise_field(rng, H, W) * 0.7 + wobble * 0.7)
-    # Disparity quantisation.
-    d = np.round(fb / zn / cfg.disparity_step) * cfg.disparity_step
-    zq = fb / np.maximum(d, 1e-6)
+    zn = z + sigma * (noise_field(rng, H, W) * cfg.white + wobble * cfg.wobble)
+    if cfg.flying > 0:  # edge pixels that survived: a depth between the two surfaces they straddle
+        fly = edge & (draw >= p_hole) & (rng.random((H, W), dtype=np.float32) < cfg.flying)
+        mix = rng.random(int(fly.sum())).astype(np.float32)
+        zn[fly] = zmin[fly] + mix * (zmax[fly] - zmin[fly])
+    if cfg.multipath > 0 and owner is not None:  # light bouncing off nearby walls lengthens the path
+        zs = cv2.resize(z.astype(np.float32), (W // 8, H // 8), interpolation=cv2.INTER_AREA)
+        zs = cv2.resize(cv2.GaussianBlur(zs, (0, 0), 3), (W, H), interpolation=cv2.INTER_LINEAR)
+        zn = zn + np.where(owner < 0, cfg.multipath * np.clip(z - zs, 0, 400), 0)
+    if cfg.quantisation == "mm":
+        zq = np.round(zn / cfg.quant_mm) * cfg.quant_mm
+    else:  # disparity quantisation
+        d = np.round(fb / zn / cfg.disparity_step) * cfg.disparity_step
+        zq = fb / np.maximum(d, 1e-6)
     in_range = (zq >= cfg.min_range) & (zq <= cfg.max_range)
     out = np.where(valid & ~holes & in_range, np.round(zq), 0)
     out[:, : cfg.left_band] = 0
+    if cfg.fov_radius > 0:
+        out[fov_mask(W, H, cfg.fov_radius)] = 0
     return np.clip(out, 0, 65535).astype(np.uint16)
+
+
+def projector_shadow(z: np.ndarray, valid: np.ndarray, fb: float, min_range: float) -> np.ndarray:
+    """``(H, W)`` bool: pixels that a projector ``fb / fx`` mm to the camera's right cannot see.
+
+    A z-buffer seen from the projector, one row at a time (same row, shifted column)."""
+    H, W = z.shape
+    up = np.round(np.arange(W)[None, :] + fb / z).astype(np.int64)  # projector column of every pixel
+    up = np.clip(up, 0, W + int(fb / min_range) + 1)
+    Wp = W + int(fb / min_range) + 2
+    key = (np.arange(H)[:, None] * Wp + up).ravel()
+    proj = np.full(H * Wp, np.inf)
+    np.minimum.at(proj, key[valid.ravel()], z.ravel()[valid.ravel()])
+    return z > proj[key].reshape(H, W) * 1.03
+
+
+@functools.lru_cache(maxsize=8)
+def fov_mask(W: int, H: int, radius: float) -> np.ndarray:
+    """``(H, W)`` bool: pixels outside a circle of ``radius`` times the half diagonal (a ToF's round FOV)."""
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    r = np.sqrt((xx - W / 2) ** 2 + (yy - H / 2) ** 2) / np.hypot(W / 2, H / 2)
+    return r > radius
 
 
 @dataclass
@@ -101,6 +178,9 @@ class Lighting:
     ambient: float
     white_balance: np.ndarray  # (3,) RGB gains
     exposure: float
+    extra: tuple[tuple[np.ndarray, float], ...] = ()  # further lights: (unit direction (3,), intensity)
+    shininess: float = 40.0  # Blinn-Phong exponent
+    specular_gain: float = 1.0  # scales every material's highlight
 
 
 def sample_lighting(rng: np.random.Generator) -> Lighting:
@@ -135,6 +215,18 @@ def noise_field(rng: np.random.Generator, H: int, W: int) -> np.ndarray:
 
 # sRGB-like gamma as a lookup table (a power over every pixel costs more than the rest of the shading).
 _GAMMA = (np.linspace(0, 1, 4096, dtype=np.float32) ** (1 / 2.2)).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=32)
+def _tone_curve(gamma: float, tonemap: str) -> np.ndarray:
+    """The 4096-entry lookup table from linear radiance in [0, 1] (or [0, 2] with Reinhard) to display."""
+    if gamma == 2.2 and tonemap == "clip":
+        return _GAMMA
+    x = np.linspace(0, 1, 4096, dtype=np.float64)
+    if tonemap == "reinhard":  # the table spans radiance 0..2, highlights roll off instead of clipping
+        x = 2 * x
+        x = x * (1 + x / 1.6**2) / (1 + x)
+    return (np.clip(x, 0, 1) ** (1 / gamma)).astype(np.float32)
 
 
 @functools.lru_cache(maxsize=16)
@@ -174,9 +266,22 @@ def shade_colour(
     l_key = (world_to_cam[:3, :3] @ light.key_dir).astype(np.float32)
     view, vignette = _view_geometry(K.fx, K.fy, K.cx, K.cy, W, H, cfg.vignetting)
     nx, ny, nz = n[0], n[1], n[2]
-    diffuse = np.maximum(nx * l_key[0] + ny * l_key[1] + nz * l_key[2], 0)
+
+    def lit(d: np.ndarray) -> np.ndarray:
+        cos = nx * d[0] + ny * d[1] + nz * d[2]
+        if cfg.diffuse == "half_lambert":
+            return (cos * 0.5 + 0.5) ** 2
+        return np.maximum(cos, 0)
+
+    diffuse = lit(l_key)
     n_dot_v = np.maximum(nx * view[0] + ny * view[1] + nz * view[2], 0)  # a fill light near the camera
-    shade = light.ambient + light.key * diffuse + light.fill * n_dot_v
+    ambient = light.ambient
+    if cfg.hemisphere:  # more light from the ceiling than from the floor
+        up = (world_to_cam[:3, :3] @ np.array([0.0, 0.0, 1.0])).astype(np.float32)
+        ambient = light.ambient * (1 + cfg.hemisphere * (nx * up[0] + ny * up[1] + nz * up[2]))
+    shade = ambient + light.key * diffuse + light.fill * n_dot_v
+    for d, intensity in light.extra:
+        shade = shade + intensity * lit((world_to_cam[:3, :3] @ d).astype(np.float32))
     # Fabric/grain texture: a fresh noise field at two scales.
     grain = noise_field(rng, H, W)
     blotch = cv2.resize(
@@ -190,12 +295,21 @@ def shade_colour(
         nv = np.stack([n[i][shiny] for i in range(3)], 1)
         half = np.stack([view[i][shiny] for i in range(3)], 1) + l_key
         half /= np.maximum(np.linalg.norm(half, axis=1, keepdims=True), 1e-6)
-        spec = specular[shiny] * np.maximum((nv * half).sum(1), 0) ** 40 * light.exposure
+        spec = specular[shiny] * np.maximum((nv * half).sum(1), 0) ** light.shininess * light.exposure
+        if light.specular_gain != 1.0:
+            spec = spec * light.specular_gain
         radiance[shiny] += spec[:, None]
     radiance *= (light.white_balance).astype(np.float32)
-    img = _GAMMA[np.clip(radiance * (len(_GAMMA) - 1), 0, len(_GAMMA) - 1).astype(np.int32)]
+    curve = _tone_curve(cfg.gamma, cfg.tonemap)
+    scale = (len(curve) - 1) / (2.0 if cfg.tonemap == "reinhard" else 1.0)
+    img = curve[np.clip(radiance * scale, 0, len(curve) - 1).astype(np.int32)]
     img += np.stack([noise_field(rng, H, W) for _ in range(3)], -1) * np.sqrt(
         (cfg.read_noise / 255) ** 2 + cfg.shot_noise**2 * img
     )
-    img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma)
-    return np.clip(img * 255 + 0.5, 0, 255).astype(np.uint8)
+    if cfg.blur_sigma > 0:
+        img = cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma)
+    out = np.clip(img * 255 + 0.5, 0, 255).astype(np.uint8)
+    if cfg.jpeg_quality > 0:  # block artefacts and chroma subsampling of a compressed stream
+        ok, buf = cv2.imencode(".jpg", out[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(cfg.jpeg_quality)])
+        out = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1].copy()
+    return out

@@ -25,6 +25,7 @@ import numpy as np
 from posenet.data.synth.body import sample_outfit
 from posenet.data.synth.boxes import box_iou, covered, project_boxes
 from posenet.data.synth.bystanders import add_bystanders
+from posenet.data.synth.looks import Look
 from posenet.data.synth.poses import lying_pose
 from posenet.data.synth.primitives import OWNER_ROOM, Material, box, capsule
 from posenet.data.synth.rig import Rig, mvor_rig
@@ -301,9 +302,12 @@ def assign_boxes(rig: Rig, persons: list[Person], boxes: dict[tuple[int, int], l
 
 
 def twin_frame(
-    ctx: TwinContext, info: TwinFrameInfo, rng: np.random.Generator
+    ctx: TwinContext, info: TwinFrameInfo, rng: np.random.Generator, look: Look | None = None
 ) -> tuple[Frame, dict[str, int]]:
-    """The twin of one MVOR frame, and how its hidden people were hidden."""
+    """The twin of one MVOR frame, and how its hidden people were hidden.
+
+    ``look`` (None: the twin look) dresses every person before the occluders are fitted to their silhouettes,
+    then adds its own occluders, which keep off the people that MVOR shows."""
     T = ctx.cam0_to_world
     persons = []
     for pid, kp, role in info.poses:
@@ -331,10 +335,16 @@ def twin_frame(
         persons.append(Person(pts, sample_outfit(rng, "patient"), -1, "patient", hump))
         room.primitives += sheet
     frame = Frame(persons, room.primitives, sample_lighting(rng))
+    dress = None if look is None else look.dress
+    if dress is not None:
+        for person in persons:
+            dress(person)
     must_show = assign_boxes(ctx.rig, persons, info.boxes)
-    stats_by = add_bystanders(frame, ctx.rig, info.bystander_boxes, must_show, (room_xy, half), rng)
+    stats_by = add_bystanders(frame, ctx.rig, info.bystander_boxes, must_show, (room_xy, half), rng, dress)
     must_hide = {
         (v, i) for i, p in enumerate(persons) if p.person_id >= 0 for v in range(ctx.rig.num_views)
     } - must_show
     stats = add_occluders(frame, ctx.rig, must_hide, must_show, ceiling)
+    if look is not None:
+        stats |= look.finish(frame, ctx.rig, must_show)
     return frame, dict(stats, **stats_by)

@@ -13,7 +13,9 @@ expressed in the frame of the dataset's camera 0 (the first camera of day 1), wh
 requires of them.
 
 Every frame is rendered from its own generator, seeded by (seed, day, frame number), so the output does not
-depend on the number of workers or on which frames are rendered.
+depend on the number of workers or on which frames are rendered. The look (``--look``; see
+:mod:`posenet.data.synth.looks`) draws from a second generator of its own, seeded the same way, so that a seed
+gives the same poses, rig and room under every look, and the ``twin`` look the same bytes as before looks existed.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from posenet.data.synth.looks import LOOKS, Look, make_look
 from posenet.data.synth.procedural import procedural_frame
 from posenet.data.synth.rig import Rig, random_rig
 from posenet.data.synth.scene import Frame, render_frame
@@ -35,7 +38,7 @@ from posenet.data.synth.skeleton_full import NUM_MVOR_POINTS
 from posenet.data.synth.twin import TwinContext, load_twin, twin_frame
 from posenet.skeleton import BONES, JOINTS
 
-VERSION = "1.0"
+VERSION = "1.1"  # 1.1: looks (the twin look renders exactly what 1.0 rendered)
 MODE_CODES = {"procedural": 1, "twin": 2}
 # MVOR's category block, 1-based bones as in the real file.
 CATEGORIES = [
@@ -65,6 +68,7 @@ class SynthConfig:
     limit: int | None = None  # twin: render only the first N MVOR frames (tests, benchmarks)
     stride: int = 1  # twin: render every stride-th MVOR frame (quick fidelity checks)
     png_compression: int = 1  # cv2 PNG level: 1 is fast, the files barely shrink at higher levels
+    look: str = "twin"  # "twin" (the look before looks existed), "random" (to train on) or "alt" (to test on)
     version: str = VERSION
 
 
@@ -193,12 +197,22 @@ def _init_worker(cfg: SynthConfig, rigs: DatasetRigs, twin: TwinContext | None) 
 
 
 def _build_frame(
-    cfg: SynthConfig, rigs: DatasetRigs, twin: TwinContext | None, job: Job, rng: np.random.Generator
+    cfg: SynthConfig,
+    rigs: DatasetRigs,
+    twin: TwinContext | None,
+    job: Job,
+    rng: np.random.Generator,
+    look: Look | None = None,
 ) -> tuple[Frame, dict]:
     if cfg.mode == "twin":
-        return twin_frame(twin, twin.frames[job.index], rng)
+        return twin_frame(twin, twin.frames[job.index], rng, look)
     rig = rigs.rigs[job.day]
-    return procedural_frame(rng, enclose=rig.cam_to_world[:, :3, 3]), {}
+    frame = procedural_frame(rng, enclose=rig.cam_to_world[:, :3, 3])
+    if look is None:
+        return frame, {}
+    for person in frame.persons:
+        look.dress(person)
+    return frame, look.finish(frame, rig)
 
 
 def render_job(job: Job) -> JobResult:
@@ -208,7 +222,8 @@ def render_job(job: Job) -> JobResult:
     twin: TwinContext | None = _STATE["twin"]
     t0 = time.perf_counter()
     rng = frame_rng(cfg.seed, cfg.mode, job.day, job.frame)
-    frame, stats = _build_frame(cfg, rigs, twin, job, rng)
+    look = make_look(cfg.look, frame_rng(cfg.seed, cfg.mode, job.day, job.frame, purpose=2))
+    frame, stats = _build_frame(cfg, rigs, twin, job, rng, look)
     rig = rigs.rigs[job.day]
     views = render_frame(frame, rig, rng)
     out = Path(cfg.out)
@@ -305,6 +320,8 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
     """Render the dataset described by ``cfg`` into ``cfg.out``; returns a summary (see :func:`summarise`)."""
     if cfg.mode not in MODE_CODES:
         raise ValueError(f"unknown mode {cfg.mode!r}; expected one of {tuple(MODE_CODES)}")
+    if cfg.look not in LOOKS:
+        raise ValueError(f"unknown look {cfg.look!r}; expected one of {LOOKS}")
     twin = None
     if cfg.mode == "twin" or cfg.rig == "mvor":
         if not cfg.mvor_annotations or not Path(cfg.mvor_annotations).is_file():
@@ -389,7 +406,7 @@ def summarise(results: list[JobResult], wall: float) -> dict:
     support = np.bincount([s for r in results for s in r.stats.get("support", [])], minlength=5)
     hide = {}
     for r in results:
-        for k in ("occluder", "not_drawn", "out_of_view", "bystanders", "bystanders_dropped"):
+        for k in ("occluder", "not_drawn", "out_of_view", "bystanders", "bystanders_dropped", "clutter"):
             if k in r.stats:
                 hide[k] = hide.get(k, 0) + r.stats[k]
     out = {
