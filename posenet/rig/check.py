@@ -1,0 +1,145 @@
+"""Sanity checks of a rig, and a calibration check from one depth frame per view that needs no target.
+
+``sanity_checks(rig)`` returns ``(level, message)`` pairs, level ``OK`` / ``WARN`` / ``FAIL``:
+- rigid extrinsics (rotation orthonormal with det +1, last row 0 0 0 1);
+- plausible intrinsics: fx, fy > 0, fx / fy near 1, the principal point inside the image, a field of view of
+  30 to 140 degrees (where the image size is known);
+- units: a camera spacing that is plausible in mm (``posenet.rig.geometry``);
+- a common volume: the point nearest all optical axes is in front of every camera and inside its image.
+
+``depth_agreement(rig, depths)`` lifts every view's depth pixels to 3D (``Camera.unproject``), moves them into each
+other view and compares their depth there with what that view measured. Where two views see the same surface the
+difference is the calibration error plus sensor noise; points hidden behind something in the other view differ by a
+lot and only by a positive amount (the other view sees something nearer), so the robust numbers are the median
+absolute difference and the share within 50 mm, over the points visible to both.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from posenet.cameras import Camera, is_rigid, pixel_grid
+from posenet.rig.geometry import PLAUSIBLE_SPACING_MM, camera_spacing, common_view
+from posenet.rig.rigfile import Rig
+
+FOV_RANGE_DEG = (30.0, 140.0)
+AGREE_MM = 50.0
+
+
+def field_of_view(camera: Camera) -> tuple[float, float] | None:
+    """Horizontal and vertical field of view in degrees of an unbatched camera, or None without an image size."""
+    if camera.size is None:
+        return None
+    w, h = camera.size
+    fx, fy = float(camera.fx), float(camera.fy)
+    return 2 * math.degrees(math.atan(w / 2 / fx)), 2 * math.degrees(math.atan(h / 2 / fy))
+
+
+def sanity_checks(rig: Rig) -> list[tuple[str, str]]:
+    out = []
+    for i, (name, c) in enumerate(zip(rig.names, rig.cameras, strict=True)):
+        tag = f"camera {i} ({name})"
+        if not bool(is_rigid(c.extrinsics)):
+            out.append(("FAIL", f"{tag}: extrinsics are not a rigid transform"))
+        fx, fy, cx, cy = (float(v) for v in c.intrinsics)
+        if fx <= 0 or fy <= 0:
+            out.append(("FAIL", f"{tag}: focal lengths must be positive, got fx {fx}, fy {fy}"))
+            continue
+        if not 0.8 <= fx / fy <= 1.25:
+            out.append(("WARN", f"{tag}: fx / fy = {fx / fy:.2f}: pixels are rarely that far from square"))
+        fov = field_of_view(c)
+        if fov is None:
+            out.append(
+                ("WARN", f"{tag}: no image size, so the principal point and field of view are unchecked")
+            )
+            continue
+        w, h = c.size
+        if not (0 <= cx <= w and 0 <= cy <= h):
+            out.append(("FAIL", f"{tag}: principal point ({cx:.1f}, {cy:.1f}) outside the {w}x{h} image"))
+        elif abs(cx - (w - 1) / 2) > 0.1 * w or abs(cy - (h - 1) / 2) > 0.1 * h:
+            out.append(
+                ("WARN", f"{tag}: principal point ({cx:.1f}, {cy:.1f}) is far from the centre of {w}x{h}")
+            )
+        lo, hi = FOV_RANGE_DEG
+        level = "OK" if lo <= fov[0] <= hi and lo <= fov[1] <= hi else "WARN"
+        out.append(
+            (
+                level,
+                f"{tag}: {w}x{h}, fx {fx:.1f} fy {fy:.1f} px, field of view {fov[0]:.0f} x {fov[1]:.0f} deg",
+            )
+        )
+    spacing = camera_spacing(rig.cameras)
+    if spacing is not None:
+        lo, hi = PLAUSIBLE_SPACING_MM
+        ok = lo <= spacing <= hi
+        out.append(("OK" if ok else "FAIL", f"units: cameras a median {spacing:.0f} mm apart"
+                    + ("" if ok else f"; outside {lo:.0f}..{hi:.0f} mm: are the translations in mm?")))  # fmt: skip
+        view = common_view(rig.stacked)
+        n = int(view["in_view"].sum())
+        p = view["point"].tolist()
+        dist = ", ".join(f"{float(d):.0f}" for d in view["axis_distance_mm"])
+        out.append(
+            ("OK" if n == len(rig) else "WARN" if n >= 2 else "FAIL",
+             f"common volume: the point nearest all optical axes, ({p[0]:.0f}, {p[1]:.0f}, {p[2]:.0f}) mm, is in "
+             f"view of {n}/{len(rig)} cameras; axes pass it at {dist} mm")
+        )  # fmt: skip
+    if rig.first_is_reference:
+        out.append(("OK", "reference frame: camera 0 (its extrinsics are the identity)"))
+    else:
+        out.append(("OK", f"reference frame: {rig.frame} (camera 0's extrinsics are not the identity)"))
+    return out
+
+
+def lift_depth(camera: Camera, depth: np.ndarray, stride: int = 4) -> torch.Tensor:
+    """(N, 3) reference-frame points of every ``stride``-th valid pixel of a (H, W) uint16 mm depth image."""
+    grid = pixel_grid(*depth.shape, dtype=torch.float64)[::stride, ::stride].reshape(-1, 2)  # (N, 2)
+    d = torch.as_tensor(depth[::stride, ::stride].astype(np.float64)).reshape(-1)
+    keep = d > 0
+    return camera.unproject(grid[keep], d[keep])[1]
+
+
+def depth_agreement(rig: Rig, depths: list[np.ndarray], stride: int = 4) -> list[dict]:
+    """Per ordered view pair (i, j): how view i's depth points agree with view j's depth where j sees them.
+
+    Returns dicts with ``pair`` (i, j), ``overlap`` (share of i's valid points that fall inside j's image, in
+    front of it, on a valid depth pixel), ``median_abs_mm`` and ``median_mm`` (j's measured depth minus the point's
+    depth in j, over points within 4 x AGREE_MM, i.e. not occluded), ``within`` (share of overlapping points within
+    AGREE_MM).
+    """
+    if len(depths) != len(rig):
+        raise ValueError(
+            f"{len(depths)} depth frames for {len(rig)} cameras: give one per camera, in rig order"
+        )
+    for i, (c, d) in enumerate(zip(rig.cameras, depths, strict=True)):
+        if c.size is not None and (d.shape[1], d.shape[0]) != tuple(c.size):
+            raise ValueError(
+                f"depth frame {i} is {d.shape[1]}x{d.shape[0]} but camera {i} is {c.size[0]}x{c.size[1]}"
+            )
+    clouds = [lift_depth(c, d, stride) for c, d in zip(rig.cameras, depths, strict=True)]
+    out = []
+    for i, points in enumerate(clouds):
+        for j, (cam, depth) in enumerate(zip(rig.cameras, depths, strict=True)):
+            if i == j or len(points) == 0:
+                continue
+            in_j = cam.to_camera(points)  # (N, 3)
+            uv = cam.project_camera(in_j).round().long()
+            h, w = depth.shape
+            inside = (in_j[:, 2] > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+            measured = torch.zeros(len(points), dtype=torch.float64)
+            measured[inside] = torch.as_tensor(
+                depth[uv[inside, 1].numpy(), uv[inside, 0].numpy()].astype(np.float64)
+            )
+            seen = inside & (measured > 0)
+            diff = (measured - in_j[:, 2])[seen]
+            near = diff[diff.abs() < 4 * AGREE_MM]
+            out.append({
+                "pair": (i, j),
+                "overlap": float(seen.float().mean()),
+                "median_abs_mm": float(near.abs().median()) if len(near) else float("nan"),
+                "median_mm": float(near.median()) if len(near) else float("nan"),
+                "within": float((diff.abs() < AGREE_MM).float().mean()) if len(diff) else float("nan"),
+            })  # fmt: skip
+    return out

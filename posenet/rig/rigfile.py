@@ -1,0 +1,175 @@
+"""A camera rig and its ``rig.json``: the per-view ``camera`` objects that ``POST /scenes`` takes.
+
+``rig.json`` is a JSON list with one object per camera, in view order, each with exactly the fields of the
+service's camera schema (``service/schemas.py: CameraIn``)::
+
+    [{"fx": 538.6, "fy": 538.2, "cx": 315.8, "cy": 241.9, "distortion": null,
+      "extrinsics": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "image_size": [640, 480]}, ...]
+
+so a converted rig can be pasted into a request as it is. Every convention is ``posenet.cameras``'s: mm, OpenCV
+axes, ``extrinsics`` = T(v->ref) mapping camera-v points into the reference frame, distortion in OpenCV's order
+(k1, k2, p1, p2, k3). The reference frame is the first camera's (its extrinsics are the identity) unless the
+rig was converted with ``--ref world``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from posenet.cameras import Camera, is_rigid, rigid_inverse
+
+CAMERA_FIELDS = ("fx", "fy", "cx", "cy", "distortion", "extrinsics", "image_size")
+
+
+@dataclass
+class Rig:
+    """V unbatched cameras that share one reference frame, with what was learnt while reading them.
+
+    Attributes:
+        cameras: V :class:`Camera` objects (float64), extrinsics T(v->ref) in mm.
+        names: V camera names (file names, serial numbers, EasyMocap keys); used by the exporters.
+        frame: what the reference frame is, in words (``"camera 0"``, ``"world (EasyMocap)"``).
+        report: the conventions and units found or assumed while reading, one line each, for the user.
+        to_room: optional (4, 4) T(ref->room), mm, e.g. from MVOR's ``firstCamToRoomRef``: a frame with a known
+            floor, used by ``--ref world`` and by the check picture.
+    """
+
+    cameras: list[Camera]
+    names: list[str]
+    frame: str = "camera 0"
+    report: list[str] = field(default_factory=list)
+    to_room: torch.Tensor | None = None
+
+    def __post_init__(self) -> None:
+        if len(self.cameras) != len(self.names):
+            raise ValueError(f"{len(self.cameras)} cameras but {len(self.names)} names")
+        if not self.cameras:
+            raise ValueError("a rig needs at least one camera")
+
+    def __len__(self) -> int:
+        return len(self.cameras)
+
+    @property
+    def stacked(self) -> Camera:
+        """The cameras as one camera of batch shape (V,)."""
+        return Camera.stack(self.cameras)
+
+    @property
+    def first_is_reference(self) -> bool:
+        """Whether the reference frame is camera 0's (its extrinsics are the identity, to 1e-9)."""
+        T = self.cameras[0].extrinsics
+        return bool((T - torch.eye(4, dtype=T.dtype)).abs().max() < 1e-9)
+
+    def reframed(self, ref_from_old: torch.Tensor, frame: str) -> Rig:
+        """The same rig in another frame: ``ref_from_old`` (4, 4) maps old reference points to the new frame."""
+        cams = [Camera(c.intrinsics, ref_from_old @ c.extrinsics, c.distortion, c.size) for c in self.cameras]
+        to_room = None if self.to_room is None else self.to_room @ rigid_inverse(ref_from_old)
+        return Rig(cams, list(self.names), frame, list(self.report), to_room)
+
+    def to_first_camera(self) -> Rig:
+        """The rig with camera 0's frame as reference (MVOR's convention): T'(v->0) = T(0->ref)^-1 T(v->ref)."""
+        if self.first_is_reference:
+            return self
+        return self.reframed(rigid_inverse(self.cameras[0].extrinsics), "camera 0")
+
+    def to_room_frame(self) -> Rig:
+        """The rig in its room frame (``to_room``); ValueError when the input had none."""
+        if self.to_room is None:
+            raise ValueError(f"this rig's input has no room/world frame besides its reference ({self.frame})")
+        rig = self.reframed(self.to_room, "room")
+        rig.to_room = torch.eye(4, dtype=torch.float64)
+        return rig
+
+
+# ----------------------------------------------------------------------------------------------- rig.json
+def camera_json(camera: Camera) -> dict:
+    """One camera as the service's ``camera`` object (``CameraIn``'s fields, plain floats)."""
+    fx, fy, cx, cy = (float(x) for x in camera.intrinsics)
+    return {
+        "fx": fx,
+        "fy": fy,
+        "cx": cx,
+        "cy": cy,
+        "distortion": None if camera.distortion is None else [float(x) for x in camera.distortion],
+        "extrinsics": [[float(x) for x in row] for row in camera.extrinsics],
+        "image_size": None if camera.size is None else [int(camera.size[0]), int(camera.size[1])],
+    }
+
+
+def camera_from_json(entry: dict, where: str = "camera") -> Camera:
+    """A camera from one ``rig.json`` / ``CameraIn`` object; ValueError naming ``where`` and the problem."""
+    if not isinstance(entry, dict):
+        raise ValueError(
+            f"{where}: expected a JSON object with {list(CAMERA_FIELDS)}, got {type(entry).__name__}"
+        )
+    unknown = sorted(set(entry) - set(CAMERA_FIELDS))
+    missing = [k for k in ("fx", "fy", "cx", "cy", "extrinsics") if k not in entry]
+    if unknown or missing:
+        raise ValueError(
+            f"{where}: unknown fields {unknown}, missing fields {missing}; allowed: {list(CAMERA_FIELDS)}"
+        )
+    T = torch.tensor(entry["extrinsics"], dtype=torch.float64)
+    if T.shape != (4, 4):
+        raise ValueError(
+            f"{where}.extrinsics must be 4x4 (row-major nested lists), got shape {tuple(T.shape)}"
+        )
+    size = entry.get("image_size")
+    return Camera.create(
+        entry["fx"], entry["fy"], entry["cx"], entry["cy"], T, entry.get("distortion"),
+        None if size is None else (int(size[0]), int(size[1])),
+    )  # fmt: skip
+
+
+def write_rig_json(rig: Rig, path: str | Path) -> None:
+    """Write ``rig.json`` (see the module docstring)."""
+    Path(path).write_text(json.dumps([camera_json(c) for c in rig.cameras], indent=1) + "\n")
+
+
+def read_rig_json(path: str | Path, names: Sequence[str] | None = None) -> Rig:
+    """Read a ``rig.json``; its frame is camera 0's when the first extrinsics are the identity."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"rig file {path} does not exist")
+    entries = json.loads(path.read_text())
+    if isinstance(entries, dict) and "views" in entries:  # a whole scene request: take its cameras
+        entries = [v["camera"] for v in entries["views"]]
+    if not isinstance(entries, list) or not entries:
+        raise ValueError(f"{path}: expected a non-empty JSON list of camera objects")
+    cameras = [camera_from_json(e, f"{path.name}[{i}]") for i, e in enumerate(entries)]
+    bad = [i for i, c in enumerate(cameras) if not bool(is_rigid(c.extrinsics))]
+    if bad:
+        raise ValueError(
+            f"{path}: the extrinsics of cameras {bad} are not rigid transforms (rotation + mm translation)"
+        )
+    rig = Rig(cameras, list(names) if names else [f"cam{i}" for i in range(len(cameras))])
+    rig.frame = "camera 0" if rig.first_is_reference else "the rig file's reference frame"
+    rig.report.append(f"{path.name}: {len(cameras)} cameras, T(v->ref) in mm, reference frame: {rig.frame}")
+    return rig
+
+
+def rig_difference(a: Rig, b: Rig) -> float:
+    """The largest relative difference between two rigs' cameras (intrinsics, extrinsics, distortion, size).
+
+    Intrinsics and distortion are compared relative to their own norms; translations relative to the rig's
+    size (the largest camera distance from the reference), rotations absolutely (they are of norm 1).
+    """
+    if len(a) != len(b):
+        return float("inf")
+    scale = max(float(c.position.norm()) for c in b.cameras) or 1.0
+    worst = 0.0
+    for ca, cb in zip(a.cameras, b.cameras, strict=True):
+        if ca.size != cb.size or (ca.distortion is None) != (cb.distortion is None):
+            return float("inf")
+        worst = max(worst, float((ca.intrinsics - cb.intrinsics).norm() / cb.intrinsics.norm()))
+        worst = max(worst, float((ca.extrinsics[:3, :3] - cb.extrinsics[:3, :3]).abs().max()))
+        worst = max(worst, float((ca.extrinsics[:3, 3] - cb.extrinsics[:3, 3]).norm()) / scale)
+        if ca.distortion is not None:
+            worst = max(
+                worst, float((ca.distortion - cb.distortion).norm() / cb.distortion.norm().clamp_min(1e-12))
+            )
+    return worst
