@@ -74,6 +74,16 @@ def folds(days: Iterable[int] = MVOR_DAYS) -> list[tuple[tuple[int, ...], int]]:
     return [(tuple(d for d in days if d != test), test) for test in days]
 
 
+def check_reader_options(subsample, modalities: Sequence[str]) -> tuple[int, tuple[str, ...]]:
+    """The ``subsample`` factor and ``modalities`` every reader takes, checked (ValueError naming the problem)."""
+    if isinstance(subsample, bool) or int(subsample) != subsample or subsample < 1:
+        raise ValueError(f"subsample must be a positive integer, got {subsample!r}")
+    unknown = [m for m in modalities if m not in MODALITIES]
+    if unknown:
+        raise ValueError(f"unknown modalities {unknown}; choose from {MODALITIES}")
+    return int(subsample), tuple(modalities)
+
+
 def collate_samples(batch: Sequence[Sample]) -> list[Sample]:
     """DataLoader ``collate_fn``: samples differ in persons and boxes, so a batch stays a list."""
     return list(batch)
@@ -177,13 +187,8 @@ class MvorDataset(torch.utils.data.Dataset):
             self.annotations = annotations
         else:
             self.annotations = load_annotations(annotations)
-        if isinstance(subsample, bool) or int(subsample) != subsample or subsample < 1:
-            raise ValueError(f"subsample must be a positive integer, got {subsample!r}")
-        self.subsample = int(subsample)
-        unknown = [m for m in modalities if m not in MODALITIES]
-        if unknown:
-            raise ValueError(f"unknown modalities {unknown}; choose from {MODALITIES}")
-        self.modalities = tuple(modalities) if root is not None else ()
+        self.subsample, modalities = check_reader_options(subsample, modalities)
+        self.modalities = modalities if root is not None else ()
         self.root = None if root is None else Path(root)
         if self.root is not None and self.modalities and not self.root.is_dir():
             raise FileNotFoundError(f"dataset root {self.root} is not a folder")
