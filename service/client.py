@@ -2,6 +2,7 @@
 
     python -m service.client DATASET_DIR --annotations A.json --url http://localhost:8000
         --out results.jsonl [--concurrency 4] [--reference-boxes] [--days 4] [--evaluate] [--token T]
+    python -m service.client RECORDING_DIR --url http://localhost:8000 --out results.jsonl   # rig.json + cam*/
 
 Each finished frame is appended to ``--out`` as one line, flushed and fsynced, so a killed run loses at most
 the frames in flight. A restarted run skips the frames already in the file (a line cut short by the kill is
@@ -251,7 +252,12 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("dataset", type=Path, help="dataset root holding dayD/camC/{color,depth}/NNNNNN.png")
-    parser.add_argument("--annotations", type=Path, required=True, help="MVOR-format annotation json")
+    parser.add_argument(
+        "--annotations",
+        type=Path,
+        help="MVOR-format annotation json; without it DATASET_DIR is a recording folder (rig.json + "
+        "<camera>/{color,depth}/, posenet.data.recording)",
+    )
     parser.add_argument(
         "--url", default=ClientConfig.url, help="the service's base URL (default: %(default)s)"
     )
@@ -282,8 +288,15 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.concurrency < 1:
         raise SystemExit("--concurrency must be at least 1")
-    gt = load_annotations(args.annotations)
-    dataset = MvorDataset(None, gt, days=args.days)  # annotations only: the images are sent as raw files
+    if args.annotations is None:  # a recording folder: frames and cameras only, nothing to evaluate against
+        from posenet.data.recording import RecordingDataset
+
+        if args.reference_boxes or args.evaluate or args.days:
+            raise SystemExit("--reference-boxes, --evaluate and --days need --annotations")
+        gt, dataset = None, RecordingDataset(args.dataset, modalities=())
+    else:
+        gt = load_annotations(args.annotations)
+        dataset = MvorDataset(None, gt, days=args.days)  # annotations only: the images are sent as raw files
     cfg = ClientConfig(
         args.url, args.concurrency, args.reference_boxes, args.token, args.timeout, args.retries
     )

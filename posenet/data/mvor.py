@@ -84,6 +84,16 @@ def check_reader_options(subsample, modalities: Sequence[str]) -> tuple[int, tup
     return int(subsample), tuple(modalities)
 
 
+def subsampled_camera(camera: Camera, factor: int) -> Camera:
+    """The camera of its image subsampled by an integer ``factor`` (``Camera.scale``, size floored)."""
+    if factor == 1:
+        return camera
+    size = camera.size
+    # Blocks that do not fit are dropped (see images.py), hence the floor.
+    small = None if size is None else (size[0] // factor, size[1] // factor)
+    return dataclasses.replace(camera.scale(1.0 / factor), size=small)
+
+
 def collate_samples(batch: Sequence[Sample]) -> list[Sample]:
     """DataLoader ``collate_fn``: samples differ in persons and boxes, so a batch stays a list."""
     return list(batch)
@@ -260,13 +270,7 @@ class MvorDataset(torch.utils.data.Dataset):
         return self.cameras[cam].size
 
     def _camera(self, cam: int, size: tuple[int, int] | None) -> Camera:
-        camera = dataclasses.replace(self.cameras[cam], size=size)
-        if self.subsample == 1:
-            return camera
-        scaled = camera.scale(1.0 / self.subsample)
-        # Blocks that do not fit are dropped (see images.py), hence the floor.
-        small = None if size is None else (size[0] // self.subsample, size[1] // self.subsample)
-        return dataclasses.replace(scaled, size=small)
+        return subsampled_camera(dataclasses.replace(self.cameras[cam], size=size), self.subsample)
 
     def _view(self, cam: int, image: dict, boxes: np.ndarray, ids: np.ndarray, kps: np.ndarray) -> View:
         size = self._full_size(cam, image)

@@ -45,7 +45,7 @@ import torch
 
 from posenet.cameras import Camera, rigid_inverse, transform_points
 from posenet.data.images import read_color, read_depth, subsample_color, subsample_depth
-from posenet.data.mvor import MODALITIES, check_reader_options
+from posenet.data.mvor import MODALITIES, check_reader_options, subsampled_camera
 from posenet.data.sample import Sample, View
 from posenet.rig.formats import read_4dor
 from posenet.skeleton import JOINTS, NUM_JOINTS
@@ -200,22 +200,13 @@ class Or4dDataset(torch.utils.data.Dataset):
         ext = "jpg" if kind == "color" else "tiff"
         return frame.folder / f"{kind}image" / f"camera{n:02d}_{kind}image-{idx}.{ext}"
 
-    def _camera(self, camera: Camera) -> Camera:
-        if self.subsample == 1:
-            return camera
-        size = camera.size
-        scaled = camera.scale(1.0 / self.subsample)
-        return dataclasses.replace(
-            scaled, size=None if size is None else (size[0] // self.subsample, size[1] // self.subsample)
-        )
-
     def __getitem__(self, index: int) -> Or4dSample:
         frame = self._frames[index]
         n_persons = len(frame.names)
         boxed = np.zeros(n_persons, np.int64)
         views = []
         for v, (n, full) in enumerate(zip(self._numbers, self.cameras[frame.take], strict=True)):
-            camera = self._camera(full)
+            camera = subsampled_camera(full, self.subsample)
             color = depth = None
             color_path = self._file(frame, n, "color")
             if "color" in self.modalities:
