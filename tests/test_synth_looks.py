@@ -1,0 +1,248 @@
+"""The renderer's looks: twin unchanged, random varied within its ranges, alt fixed, sensor-model laws."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from posenet.data.mvor import MvorDataset
+from posenet.data.synth.__main__ import main
+from posenet.data.synth.body_alt import ALT_OFFSETS, ALT_SHAPE
+from posenet.data.synth.looks import (
+    Look,
+    alt_scene,
+    make_look,
+    random_offsets,
+    random_outfit,
+    random_scene,
+    random_shape,
+)
+from posenet.data.synth.raster import GBuffer, Intrinsics
+from posenet.data.synth.scene import Person, render_frame
+from posenet.data.synth.sensor import DepthSensorConfig, simulate_depth
+from posenet.data.synth.skeleton_full import F
+from posenet.data.synth.twin import load_twin, twin_frame
+from posenet.data.synth.writer import frame_rng
+
+MVOR_JSON = Path(__file__).resolve().parents[1] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
+needs_mvor = pytest.mark.skipif(not MVOR_JSON.is_file(), reason=f"MVOR annotations not found at {MVOR_JSON}")
+TINY = ["--scenes", "1", "--days", "1", "--views", "2", "--seed", "3", "--quiet"]
+
+# Digests of tiny renders made by the renderer before looks existed (commit 01ea7db), on numpy 2.4.6 and
+# OpenCV 5.0.0: the twin look must still render exactly these bytes. Float functions may round differently on
+# another CPU or library build, so the check only runs where they give the bits they gave here.
+GOLDEN = {
+    "procedural": "305ba736800c4b4b7e49472ab7abaf70cd63c606436f7e1515fa0cff90fa5573",
+    "twin": "866099c98fd29f628e14e0f5810cfd596293aed00bac4bf97f16086bd38967e0",  # MVOR frame 300, arrays
+}
+PLATFORM = ("2.4.6", "5.0.0", "89f69f8e323013cd")
+
+
+def _platform() -> tuple[str, str, str]:
+    x = np.linspace(-20, 20, 4097)
+    funcs = np.concatenate([np.sin(x), np.cos(x), np.exp(x / 4), np.sqrt(np.abs(x)), np.arctan2(x, 1.5)])
+    return np.__version__, cv2.__version__, hashlib.sha256(funcs.tobytes()).hexdigest()[:16]
+
+
+def _digest(root: Path) -> str:
+    """Every PNG's bytes and the annotations, less the generator settings (which now name the look)."""
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*.png")):
+        h.update(str(p.relative_to(root)).encode())
+        h.update(p.read_bytes())
+    ann = json.loads((root / "annotations.json").read_text())
+    ann["dataset_info"].pop("synthetic")
+    ann["info"].pop("version", None)
+    h.update(json.dumps(ann, sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def _pngs(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*.png"))}
+
+
+@pytest.fixture(scope="module")
+def renders(tmp_path_factory):
+    """One tiny procedural render per look (same seed)."""
+    root = tmp_path_factory.mktemp("looks")
+    for look in ("twin", "random", "alt"):
+        main(["--out", str(root / look), *TINY, "--look", look])
+    return root
+
+
+@pytest.fixture(scope="module")
+def mvor_frames():
+    """MVOR's frame 300 built and rendered in every look (the library path of ``--from-mvor``)."""
+    ctx = load_twin(json.loads(MVOR_JSON.read_text()))
+    info = ctx.frames[300]
+    out = {}
+    for look in ("twin", "random", "alt"):
+        rng = frame_rng(0, "twin", info.day, info.frame)
+        frame, _ = twin_frame(ctx, info, rng, make_look(look, frame_rng(0, "twin", info.day, info.frame, 2)))
+        out[look] = frame, render_frame(frame, ctx.rig, rng)
+    return out
+
+
+def _views_digest(views) -> str:
+    h = hashlib.sha256()
+    for vr in views:
+        h.update(vr.color.tobytes())
+        h.update(vr.depth.tobytes())
+        h.update(repr(vr.boxes).encode())
+        h.update(np.round(np.stack(vr.keypoints), 3).tobytes())
+    return h.hexdigest()
+
+
+@pytest.mark.skipif(_platform() != PLATFORM, reason="golden digests were recorded on another float platform")
+def test_the_twin_look_renders_the_bytes_it_rendered_before_looks(renders, request):
+    assert _digest(renders / "twin") == GOLDEN["procedural"]
+    if MVOR_JSON.is_file():
+        _, views = request.getfixturevalue("mvor_frames")["twin"]
+        assert _views_digest(views) == GOLDEN["twin"]
+
+
+@pytest.mark.parametrize("look", ["random", "alt"])
+def test_same_seed_same_bytes_for_every_look(renders, tmp_path, look):
+    main(["--out", str(tmp_path / look), *TINY, "--look", look])
+    assert _pngs(tmp_path / look) == _pngs(renders / look)
+    assert _pngs(renders / look) != _pngs(renders / "twin")
+
+
+def test_looks_keep_the_poses_and_record_the_look(renders):
+    poses = {}
+    for look in ("twin", "random", "alt"):
+        ann = json.loads((renders / look / "annotations.json").read_text())
+        assert ann["dataset_info"]["synthetic"]["look"] == look
+        assert json.loads((renders / look / "synth_config.json").read_text())["config"]["look"] == look
+        poses[look] = {
+            p["person_id"]: np.reshape(p["keypoints3D"], (12, 4))[:, :3] for p in ann["annotations3D"]
+        }
+    assert poses["twin"]
+    for look in (
+        "random",
+        "alt",
+    ):  # the same people in the same poses (unless an occluder hid one everywhere)
+        assert poses[look] and set(poses[look]) <= set(poses["twin"])
+        for pid, kp in poses[look].items():
+            assert np.array_equal(kp, poses["twin"][pid])
+
+
+def test_the_mvor_reader_reads_every_look(renders):
+    for look in ("twin", "random", "alt"):
+        ds = MvorDataset(renders / look, renders / look / "annotations.json", subsample=2)
+        sample = ds[0]
+        assert len(sample.views) == 2 and sample.poses.shape[1:] == (10, 3)
+        for view in sample.views:
+            assert view.color.shape == (240, 320, 3) and view.depth.dtype == np.uint16
+
+
+@needs_mvor
+def test_mvor_frames_in_another_look_keep_mvor_poses_and_box_presence(mvor_frames):
+    twin_frame_, twin_views = mvor_frames["twin"]
+
+    def shown(frame, views):  # (view, person id) of the posed people with a box
+        return {(v, frame.persons[i].person_id) for v, vr in enumerate(views) for i, b in enumerate(vr.boxes)
+                if b is not None and frame.persons[i].person_id >= 0}  # fmt: skip
+
+    for look in ("random", "alt"):
+        frame, views = mvor_frames[look]
+        posed = [p for p in frame.persons if p.person_id >= 0]
+        assert [p.points[:12].tolist() for p in posed] == [
+            p.points[:12].tolist() for p in twin_frame_.persons if p.person_id >= 0
+        ]  # MVOR's real poses, unchanged
+        assert shown(frame, views) == shown(twin_frame_, twin_views)
+        assert _views_digest(views) != _views_digest(twin_views)
+
+
+def test_random_bodies_and_scenes_vary_within_their_ranges():
+    rng = np.random.default_rng(0)
+    shapes = [random_shape(rng) for _ in range(40)]
+    offsets = np.stack([s.offsets for s in shapes])  # (40, NUM_FULL, 3)
+    hips = offsets[:, F["left_hip"]]
+    shoulders = offsets[:, F["right_shoulder"]]
+    assert (hips[:, 2] >= -70).all() and (hips[:, 2] <= 0).all() and hips[:, 2].std() > 10
+    assert (shoulders[:, 2] >= 0).all() and (shoulders[:, 2] <= 35).all() and shoulders[:, 2].std() > 5
+    assert np.abs(offsets[:, F["left_knee"]]).max() == 0  # only annotated joints move
+    depth = np.array([s.chest_depth for s in shapes])
+    assert 105 * 0.88 * 0.85 <= depth.min() and depth.max() <= 105 * 1.18 * 1.2 and depth.std() > 5
+    assert any(s.belly > 0 for s in shapes) and any(s.belly == 0 for s in shapes)
+    scenes = [random_scene(rng) for _ in range(40)]
+    k = np.array([sc.depth.noise_k for sc, _ in scenes])
+    assert (k >= 0.5e-6).all() and (k <= 4e-6).all() and k.max() / k.min() > 3
+    assert {sc.colour.jpeg_quality > 0 for sc, _ in scenes} == {True, False}
+    assert {len(light.extra) for _, light in scenes} == {0, 1, 2}
+    assert all(sc.depth.model == "structured_light" and sc.colour.diffuse == "lambert" for sc, _ in scenes)
+    outfits = [random_outfit(rng) for _ in range(40)]
+    assert any(o.cap is None for o in outfits) and any(o.cap is not None for o in outfits)
+    assert len({o.top.albedo for o in outfits}) == 40
+    # Per person: two people of one scene get different bodies and clothes.
+    look = Look("random", np.random.default_rng(1))
+    people = [Person(np.zeros((20, 3)), outfits[0], i) for i in range(2)]
+    for p in people:
+        look.dress(p)
+    assert people[0].shape != people[1].shape and people[0].outfit != people[1].outfit
+
+
+def test_alt_is_one_fixed_look_outside_what_random_draws():
+    a, b = Look("alt", np.random.default_rng(0)), Look("alt", np.random.default_rng(1))
+    for scene in (b.scene, alt_scene()[0]):
+        assert a.scene.depth == scene.depth and a.scene.colour == scene.colour
+        assert np.array_equal(a.scene.room_gain, scene.room_gain)
+    assert a.scene.depth.model == "tof" and a.scene.colour.diffuse == "half_lambert"
+    person = Person(np.zeros((20, 3)), random_outfit(np.random.default_rng(0)), 0)
+    a.dress(person)
+    assert person.shape is ALT_SHAPE and person.shape.model == "alt"
+    drawn = np.stack([random_offsets(np.random.default_rng(s)) for s in range(200)])
+    for joint in ("left_shoulder", "left_hip"):  # its joints sit where random never puts them
+        z = ALT_OFFSETS[F[joint], 2]
+        assert z > drawn[:, F[joint], 2].max() or z < drawn[:, F[joint], 2].min()
+
+
+def _wall(z: float, H: int = 96, W: int = 128) -> tuple[GBuffer, Intrinsics]:
+    normal = np.zeros((3, H, W), np.float32)
+    normal[2] = -1
+    return GBuffer(np.full((H, W), z), np.zeros((H, W), np.int32), normal), Intrinsics(120, 120, 64, 48, W, H)
+
+
+def _noise_std(cfg: DepthSensorConfig, z: float) -> float:
+    g, K = _wall(z)
+    d = simulate_depth(g, K, np.zeros(g.depth.shape, np.float32), np.random.default_rng(0), cfg).astype(float)
+    return float((d[d > 0] - z).std())
+
+
+def test_depth_noise_grows_with_z_squared_for_structured_light_and_linearly_for_tof():
+    sl = DepthSensorConfig(noise_k=3e-6, quantisation="mm", quant_mm=0.01, speckle=0, left_band=0)
+    ratio = _noise_std(sl, 4000) / _noise_std(sl, 2000)
+    assert 3.3 < ratio < 4.7, ratio  # sigma = k z^2
+    tof = alt_scene()[0].depth
+    tof = DepthSensorConfig(**{**tof.__dict__, "quant_mm": 0.01, "speckle": 0.0, "fov_radius": 0.0})
+    ratio = _noise_std(tof, 4000) / _noise_std(tof, 2000)
+    assert 1.6 < ratio < 2.2, ratio  # sigma = c + a z
+
+
+def test_holes_are_zero_and_valid_depths_lie_in_range():
+    g, K = _wall(3000)
+    g.depth[:, 64:] = 1500  # a step: edge holes and flying pixels along column 64
+    for cfg in (DepthSensorConfig(), random_scene(np.random.default_rng(4))[0].depth, alt_scene()[0].depth):
+        d = simulate_depth(g, K, np.zeros(g.depth.shape, np.float32), np.random.default_rng(0), cfg)
+        valid = d > 0
+        assert 0.0 < 1 - valid.mean() < 0.5
+        assert (d[valid] >= cfg.min_range).all() and (d[valid] <= cfg.max_range).all()
+        assert (d[:, : cfg.left_band] == 0).all()
+    d = simulate_depth(
+        g, K, np.zeros(g.depth.shape, np.float32), np.random.default_rng(0), alt_scene()[0].depth
+    )
+    assert (d[0, 0], d[-1, -1]) == (0, 0)  # the ToF's round field of view
+    mixed = d[:, 62:66][(d[:, 62:66] > 1600) & (d[:, 62:66] < 2900)]
+    assert len(mixed) > 10  # flying pixels between the two surfaces, only at the edge
+    assert not ((d[:, :58] > 1600) & (d[:, :58] < 2900)).any()
+    # Dark surfaces and projector shadows: holes where the model says, the rest kept.
+    dark = np.zeros(g.depth.shape, np.float32)
+    dark[:, :32] = 1.0
+    d = simulate_depth(g, K, dark, np.random.default_rng(0), DepthSensorConfig())
+    assert (d[:, 8:32] == 0).all() and (d[:, 90:] > 0).mean() > 0.9
