@@ -2,6 +2,7 @@
 
     python benchmarks/synth_speed.py --frames 12
     python benchmarks/synth_speed.py --frames 12 --mvor ../shared/mvor/camma_mvor_2018.json  # twin frames too
+    python benchmarks/synth_speed.py --frames 12 --looks twin random alt  # each look (default: all three)
 
 Stages: building the frame (poses, room; for the twin also the occluder placement), ray casting (z-buffer,
 ids, normals), the sensor models (depth and colour), and PNG encoding (in memory, so the disk does not count).
@@ -19,6 +20,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from posenet.data.synth.looks import LOOKS, make_look
 from posenet.data.synth.procedural import procedural_frame
 from posenet.data.synth.raster import rasterize
 from posenet.data.synth.rig import random_rig
@@ -80,23 +82,38 @@ def main() -> None:
     p.add_argument("--frames", type=int, default=12, help="frames per kind")
     p.add_argument("--mvor", default=None, help="MVOR json: also time twin frames (every 60th MVOR frame)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--looks", nargs="+", choices=LOOKS, default=list(LOOKS), help="looks to time")
     args = p.parse_args()
     cv2.setNumThreads(1)
     rng = np.random.default_rng(args.seed)
     rig = random_rig(rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), 3)
     enclose = rig.cam_to_world[:, :3, 3]
-    out = {
-        "procedural (3 views)": run(
-            lambda r: procedural_frame(r, enclose=enclose), rig, args.frames, args.seed
-        )
-    }
-    if args.mvor:
-        ctx = load_twin(json.loads(Path(args.mvor).read_text()))
-        infos = ctx.frames[:: max(len(ctx.frames) // args.frames, 1)][: args.frames]
-        it = iter(infos)
-        out["twin (3 views)"] = run(lambda r: twin_frame(ctx, next(it), r)[0], ctx.rig, len(infos), args.seed)
-        per = out["twin (3 views)"]["seconds_per_frame_cpu"]
-        out["twin_732_frames_2_workers_minutes"] = round(732 * per / 2 / 60, 1)
+    ctx = load_twin(json.loads(Path(args.mvor).read_text())) if args.mvor else None
+    out = {}
+    for name in args.looks:
+
+        def procedural(r, name=name):  # the look draws from its own generator, as in the writer
+            frame = procedural_frame(r, enclose=enclose)
+            look = None if name == "twin" else make_look(name, np.random.default_rng(r.integers(1 << 62)))
+            if look is not None:
+                for person in frame.persons:
+                    look.dress(person)
+                look.finish(frame, rig)
+            return frame
+
+        out[f"procedural, {name} (3 views)"] = run(procedural, rig, args.frames, args.seed)
+        if ctx is not None:
+            infos = ctx.frames[:: max(len(ctx.frames) // args.frames, 1)][: args.frames]
+            it = iter(infos)
+
+            def twin(r, it=it, name=name):
+                look = None if name == "twin" else make_look(name, np.random.default_rng(r.integers(1 << 62)))
+                return twin_frame(ctx, next(it), r, look)[0]
+
+            key = f"twin, {name} (3 views)"
+            out[key] = run(twin, ctx.rig, len(infos), args.seed)
+            per = out[key]["seconds_per_frame_cpu"]
+            out[f"twin, {name}: 732 frames, 2 workers, minutes"] = round(732 * per / 2 / 60, 1)
     print(json.dumps(out, indent=2))
 
 

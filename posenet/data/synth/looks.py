@@ -252,7 +252,7 @@ def random_scene(rng: np.random.Generator) -> tuple[SceneLook, Lighting]:
     (or 1-4 mm steps, 25 %), projector left or right, range 0.4-0.8 to 4.5-8 m, edge holes 20-90 % at jumps of
     2-8 %, flying pixels 0-60 % of the rest, specks 0.05-2 %, clustered holes 0.2-4 % (60 %), specular holes
     0-0.8, dark-surface dropout 1-8 below albedo 0.05-0.12 and noise x1-2.5, multipath 0.05-0.4 (60 %), left
-    band 0-16 px. Room albedo gains 0.7-1.25 per channel, surface dropout x0.5-2.
+    band 0-16 px. Room albedo gains 0.8-1.2 per channel, surface dropout x0.5-2.
     """
     u = rng.uniform
     max_range = u(4500, 8000)
@@ -301,7 +301,7 @@ def random_scene(rng: np.random.Generator) -> tuple[SceneLook, Lighting]:
         shininess=u(8, 80),
         specular_gain=u(0.3, 2.0),
     )
-    scene = SceneLook("random", depth, colour, room_gain=u(0.7, 1.25, 3), dropout_gain=u(0.5, 2.0))
+    scene = SceneLook("random", depth, colour, room_gain=u(0.8, 1.2, 3), dropout_gain=u(0.5, 2.0))
     return scene, lighting
 
 
