@@ -18,8 +18,8 @@ from fastapi.responses import JSONResponse
 
 from service.errors import InputError
 from service.limits import BodyLimitMiddleware, InFlightLimiter
-from service.pipeline import ScenePipeline
-from service.routes import protected, public
+from service.pipeline import PipelineConfig, ScenePipeline
+from service.routes import docs_router, protected, public
 from service.schemas import SceneIn
 from service.settings import Settings
 
@@ -36,6 +36,7 @@ async def lifespan(app: FastAPI):
                 settings.detector_checkpoint,
                 settings.device,
                 settings.load_detector,
+                PipelineConfig(max_pose_pixels=settings.max_pose_pixels),
             )
         )
     yield
@@ -70,16 +71,27 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
         "RGB-D frame, "
         "after Gerats et al., 'Differentiable projections'. See docs/service.md.",
         lifespan=lifespan,
+        # Served by routes.docs_router instead, so that the token covers them (unless ORPOSE_PUBLIC_DOCS).
+        docs_url=None,
+        redoc_url=None,
+        openapi_url=None,
     )
     app.state.settings = settings
     app.state.pipeline = pipeline
     app.state.in_flight = InFlightLimiter(settings.max_in_flight)
     app.add_middleware(
-        BodyLimitMiddleware, max_bytes=settings.max_body_bytes, timeout_s=settings.body_timeout_s
+        BodyLimitMiddleware,
+        max_bytes=settings.max_body_bytes,
+        timeout_s=settings.body_timeout_s,
+        max_receiving=settings.max_receiving,
+        retry_after_s=settings.retry_after_s,
     )
     app.add_exception_handler(InputError, _input_error)
     app.include_router(public)
     app.include_router(protected)
+    app.include_router(
+        docs_router(lambda: app.openapi(), protect=settings.token is not None and not settings.public_docs)
+    )
     app.openapi = lambda: _openapi(app)
     return app
 

@@ -1,10 +1,11 @@
-"""FastAPI dependencies, as ``Annotated`` aliases: settings, the loaded pipeline, the bearer token,
-admission."""
+"""FastAPI dependencies, as ``Annotated`` aliases: settings, the loaded pipeline, the bearer token; and the
+admission to an inference slot."""
 
 from __future__ import annotations
 
 import secrets
 from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
@@ -48,14 +49,16 @@ def get_pipeline(request: Request) -> ScenePipeline:
 PipelineDep = Annotated[ScenePipeline, Depends(get_pipeline)]
 
 
-async def admit(request: Request, settings: SettingsDep) -> AsyncIterator[None]:
-    """Hold one of the ``max_in_flight`` slots for the whole request, or answer 503 with Retry-After at
-    once."""
+@asynccontextmanager
+async def inference_slot(request: Request, settings: Settings) -> AsyncIterator[None]:
+    """Hold one of the ``max_in_flight`` inference slots (decoding and the models), or answer 503 with
+    Retry-After at once. The route takes it only once the body has arrived, so a slow upload never holds one.
+    """
     limiter = request.app.state.in_flight
     if not limiter.try_acquire():
         raise HTTPException(
             503,
-            f"the server is busy ({limiter.capacity} requests in flight); retry after "
+            f"the server is busy ({limiter.capacity} requests in flight, ORPOSE_MAX_IN_FLIGHT); retry after "
             f"{settings.retry_after_s} s",
             headers={"Retry-After": str(settings.retry_after_s)},
         )
@@ -63,6 +66,3 @@ async def admit(request: Request, settings: SettingsDep) -> AsyncIterator[None]:
         yield
     finally:
         limiter.release()
-
-
-Admitted = Annotated[None, Depends(admit)]

@@ -1,10 +1,15 @@
-"""Overload protection: a cap on the body (size and time to receive it) and a bound on requests in flight.
+"""Overload protection: a cap on the body (size and time to receive it), a bound on the requests still
+receiving their body, and a bound on requests in flight.
 
 The body cap is a pure ASGI middleware, so it acts before anything reads the body: a declared Content-Length
 over the limit is answered 413 at once, and a body that streams past the limit (chunked, or a lying header)
-fails with 413 as soon as it does. A body that takes longer than ``timeout_s`` to arrive gets a 408, so a
-slow client cannot hold a slot for ever. The in-flight bound turns excess load into an immediate 503 with
-Retry-After instead of an unbounded queue.
+fails with 413 as soon as it does. A body that takes longer than ``timeout_s`` to arrive gets a 408.
+
+Receiving and computing are admitted separately, so that slow uploads cannot lock anyone out of the models:
+a request holds one of ``max_receiving`` *receiving* places from the first read of its body until its last
+byte has arrived (beyond it: 503), and only then asks for one of the ``max_in_flight`` *inference* slots
+(``InFlightLimiter``, taken by the route; beyond it: 503). Both answer at once with Retry-After instead of
+queueing without end.
 """
 
 from __future__ import annotations
@@ -18,12 +23,21 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 
 class BodyLimitMiddleware:
-    """Reject request bodies larger than ``max_bytes`` (413) or slower than ``timeout_s`` to arrive (408)."""
+    """Reject request bodies larger than ``max_bytes`` (413) or slower than ``timeout_s`` to arrive (408), and
+    more than ``max_receiving`` bodies arriving at once (503 with ``Retry-After: retry_after_s``).
 
-    def __init__(self, app: ASGIApp, max_bytes: int, timeout_s: float) -> None:
+    The receiving place is taken on the app's first read of the body, that is after the route's dependencies
+    (the token) have passed, and given back when the body is complete or the request ends.
+    """
+
+    def __init__(
+        self, app: ASGIApp, max_bytes: int, timeout_s: float, max_receiving: int = 32, retry_after_s: int = 1
+    ) -> None:
         self.app = app
         self.max_bytes = max_bytes
         self.timeout_s = timeout_s
+        self.receiving = InFlightLimiter(max_receiving)
+        self.retry_after_s = retry_after_s
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -41,12 +55,28 @@ class BodyLimitMiddleware:
                 return
         received = 0
         done = False
+        holding = False
         deadline = time.monotonic() + self.timeout_s
 
+        def release() -> None:
+            nonlocal holding
+            if holding:
+                holding = False
+                self.receiving.release()
+
         async def limited_receive() -> Message:
-            nonlocal received, done
+            nonlocal received, done, holding
             if done:  # after the body, receive only waits for a disconnect: no deadline applies
                 return await receive()
+            if not holding:
+                if not self.receiving.try_acquire():
+                    raise HTTPException(
+                        503,
+                        f"the server is receiving {self.receiving.capacity} uploads already "
+                        f"(ORPOSE_MAX_RECEIVING); retry after {self.retry_after_s} s",
+                        headers={"Retry-After": str(self.retry_after_s)},
+                    )
+                holding = True
             try:
                 with anyio.fail_after(max(deadline - time.monotonic(), 0.0)):
                     message = await receive()
@@ -58,9 +88,16 @@ class BodyLimitMiddleware:
                 if received > self.max_bytes:
                     raise HTTPException(413, self._too_large(received))
                 done = not message.get("more_body", False)
+            elif message["type"] == "http.disconnect":
+                done = True
+            if done:
+                release()
             return message
 
-        await self.app(scope, limited_receive, send)
+        try:
+            await self.app(scope, limited_receive, send)
+        finally:
+            release()
 
     def _too_large(self, size: int) -> str:
         limit = self.max_bytes
@@ -77,8 +114,7 @@ async def _send_error(send: Send, status: int, detail: str) -> None:
 
 
 class InFlightLimiter:
-    """At most ``capacity`` requests admitted at once. Used only from the event loop, so a plain counter is
-    safe."""
+    """At most ``capacity`` holders at once. Used only from the event loop, so a plain counter is safe."""
 
     def __init__(self, capacity: int) -> None:
         self.capacity = capacity

@@ -48,6 +48,9 @@ class PipelineConfig:
     # Persons per frame run through the pose network (its memory grows with persons x views x crop pixels).
     # MVOR frames hold at most about 6; in detector mode the best-supported groups are kept, beyond it.
     max_persons: int = 32
+    # The service's cost bound (ORPOSE_MAX_POSE_PIXELS): persons x views x network-input pixels (x 2 with flip
+    # averaging) per frame. None: no bound beyond max_persons (offline evaluation).
+    max_pose_pixels: int | None = None
 
 
 @dataclass
@@ -170,6 +173,23 @@ class ScenePipeline:
         later = view[:, None] < np.arange(len(views))[None, :]  # (N, V)
         return float(np.prod(np.where(later, 1 + per_view, 1), axis=1).sum())
 
+    def _person_limit(self, num_views: int) -> tuple[int, str]:
+        """The most persons a frame of ``num_views`` views may run through the pose network, and why."""
+        limit, why = self.config.max_persons, f"the limit of {self.config.max_persons}"
+        if self.config.max_pose_pixels is not None:
+            model = self.pose.model.config
+            w, h = model.inputs.network_size(False)
+            per_person = num_views * w * h * (2 if model.flip_test else 1)
+            if self.config.max_pose_pixels // per_person < limit:
+                limit = self.config.max_pose_pixels // per_person
+                why = (
+                    f"the {limit} that fit in this server's budget of {self.config.max_pose_pixels} "
+                    f"network-input pixels per frame (persons x {num_views} views x {w}x{h} crops"
+                    f"{' x 2 flips' if model.flip_test else ''}; ORPOSE_MAX_POSE_PIXELS): send fewer persons "
+                    "or views per request"
+                )
+        return limit, why
+
     def _match(self, boxes: list[np.ndarray], views: list[FrameView]) -> list[list[int]]:
         """Group boxes across views by their 3D centres: per person, per view a box index or -1."""
         from detector.matching import match_boxes
@@ -225,13 +245,12 @@ class ScenePipeline:
             ids = list(range(len(groups)))
         else:
             ids, groups = [], []
-        if len(groups) > self.config.max_persons:
+        limit, why = self._person_limit(len(views))
+        if len(groups) > limit:
             if scores[0] is None:
-                raise ValueError(
-                    f"the boxes make {len(groups)} persons, more than the limit of {self.config.max_persons}"
-                )
+                raise ValueError(f"the boxes make {len(groups)} persons, more than {why}")
             # Detector mode: the matcher lists multi-view groups first; the best-supported persons are kept.
-            ids, groups = ids[: self.config.max_persons], groups[: self.config.max_persons]
+            ids, groups = ids[:limit], groups[:limit]
         timings["match"] = _ms(t0)
         persons = [
             PersonResult(

@@ -7,19 +7,24 @@ Routes stay thin: ``/scenes`` reads the multipart form into memory, hands the pa
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import anyio
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
+from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
+from fastapi.responses import HTMLResponse, JSONResponse
+from python_multipart.multipart import parse_options_header
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 from starlette.requests import ClientDisconnect
 
-from posenet.skeleton import JOINTS
-from service.deps import Admitted, PipelineDep, SettingsDep, require_token
+from service.cancel import ClientGone, run_until_disconnected
+from service.deps import PipelineDep, SettingsDep, inference_slot, require_token
 from service.errors import UNSUPPORTED_MEDIA, InputError
 from service.model_info import model_info
 from service.pipeline import SceneResult
-from service.schemas import Error, Health, Joint, ModelInfo, Person, Ready, SceneOut, Support, Timings
+from service.response import encode
+from service.schemas import Error, Health, ModelInfo, Ready, SceneOut
 from service.settings import Settings
 from service.validation import Limits, parse_scene, validate_scene
 
@@ -80,6 +85,37 @@ _SCENE_FORM = {
 _SCENE_BODY = {"schema": _SCENE_FORM, "encoding": {"scene": {"contentType": "application/json"}}}
 
 
+def docs_router(openapi: Callable[[], dict], protect: bool) -> APIRouter:
+    """``/openapi.json``, ``/docs`` (with its OAuth2 redirect) and ``/redoc``; behind the token if ``protect``.
+
+    With a token the pages cannot fetch the schema themselves (a browser sends no bearer header): read it
+    with ``curl -H "Authorization: Bearer $T" .../openapi.json``, or make the docs public
+    (ORPOSE_PUBLIC_DOCS=true).
+    """
+    router = APIRouter(include_in_schema=False, dependencies=[Depends(require_token)] if protect else [])
+    title = "OR multi-view RGB-D 3D human pose"
+
+    @router.get("/openapi.json")
+    async def schema() -> JSONResponse:
+        return JSONResponse(openapi())
+
+    @router.get("/docs")
+    async def swagger() -> HTMLResponse:
+        return get_swagger_ui_html(
+            openapi_url="/openapi.json", title=title, oauth2_redirect_url="/docs/oauth2-redirect"
+        )
+
+    @router.get("/docs/oauth2-redirect")
+    async def swagger_redirect() -> HTMLResponse:
+        return get_swagger_ui_oauth2_redirect_html()
+
+    @router.get("/redoc")
+    async def redoc() -> HTMLResponse:
+        return get_redoc_html(openapi_url="/openapi.json", title=title)
+
+    return router
+
+
 @public.get("/health", response_model=Health, summary="Liveness: the process answers")
 async def health() -> Health:
     return Health()
@@ -98,71 +134,75 @@ async def model(pipeline: PipelineDep, settings: SettingsDep) -> ModelInfo:
     return model_info(pipeline, settings.device)
 
 
+def _boundary(content_type: str) -> bytes:
+    """The multipart boundary of a ``multipart/form-data`` Content-Type; 415 for any other media type."""
+    media, options = parse_options_header(content_type)
+    if media != _MULTIPART.encode():  # exactly, case-insensitively: not multipart/form-dataX
+        got = content_type or "no content type"
+        raise InputError(
+            f"expected Content-Type multipart/form-data, got {got!r}; send the scene and the images as a "
+            "multipart form (curl -F)",
+            UNSUPPORTED_MEDIA,
+        )
+    return options.get(b"boundary", b"")
+
+
 async def _read_form(request: Request, settings: Settings) -> tuple[bytes | None, dict[str, bytes]]:
     """The ``scene`` text and the file parts, all in memory (a spool that never rolls over to disk)."""
-    content_type = request.headers.get("content-type", "")
-    if not content_type.startswith("multipart/form-data"):
-        got = content_type or "no content type"
-        raise InputError(f"expected multipart/form-data, got {got!r}", UNSUPPORTED_MEDIA)
+    boundary = _boundary(request.headers.get("content-type", ""))
+    closing = b"--" + boundary + b"--"
+    tail = b""
+
+    async def body():  # keeps the body's last bytes, to check that the form was closed
+        nonlocal tail
+        async for chunk in request.stream():
+            tail = (tail + chunk)[-(len(closing) + 8) :]
+            yield chunk
+
     parser = MultiPartParser(
-        request.headers,
-        request.stream(),
-        max_files=2 * settings.max_views + 1,
-        max_fields=4,
+        request.headers, body(), max_files=2 * settings.max_views + 1, max_fields=4,
         max_part_size=settings.max_body_bytes,
-    )
+    )  # fmt: skip
     parser.spool_max_size = settings.max_body_bytes  # the body is capped: keep every part in memory
     try:
         form = await parser.parse()
     except MultiPartException as exc:
+        if exc.message.startswith("Too many files"):
+            raise InputError(
+                f"the form has more than {parser.max_files} file parts: this server takes at most "
+                f"{settings.max_views} views (ORPOSE_MAX_VIEWS), each with the parts color_<i> and depth_<i>"
+            ) from None
         raise HTTPException(400, f"malformed multipart body: {exc.message}") from None
     except ClientDisconnect:  # nobody is left to answer; a 400 rather than a 500 traceback in the log
         raise HTTPException(400, "the client disconnected before the body was complete") from None
-    scene, files = None, {}
     try:
-        for name, value in form.multi_items():
-            data = await value.read() if isinstance(value, UploadFile) else value.encode()
-            if name == "scene":
-                if scene is not None:
-                    raise InputError("the form has more than one 'scene' part")
-                scene = data
-            elif name in files:
-                raise InputError(f"the form has more than one {name!r} part")
-            elif not isinstance(value, UploadFile):
-                # A part without a filename arrives as text, and text decoding would corrupt image bytes.
-                raise InputError(
-                    f"{name} must be a file part (with a filename), e.g. curl -F {name}=@image.png"
-                )
-            else:
-                files[name] = data
+        if boundary and not tail.rstrip(b"\r\n").endswith(closing):
+            raise HTTPException(
+                400,
+                f"malformed multipart body: it ends without the closing boundary {closing.decode(errors='replace')!r}, "
+                "so the upload was cut short or the form was not finished",
+            )
+        return await _form_parts(form)
     finally:
         await form.close()
+
+
+async def _form_parts(form) -> tuple[bytes | None, dict[str, bytes]]:
+    scene, files = None, {}
+    for name, value in form.multi_items():
+        data = await value.read() if isinstance(value, UploadFile) else value.encode()
+        if name == "scene":
+            if scene is not None:
+                raise InputError("the form has more than one 'scene' part")
+            scene = data
+        elif name in files:
+            raise InputError(f"the form has more than one {name!r} part")
+        elif not isinstance(value, UploadFile):
+            # A part without a filename arrives as text, and text decoding would corrupt image bytes.
+            raise InputError(f"{name} must be a file part (with a filename), e.g. curl -F {name}=@image.png")
+        else:
+            files[name] = data
     return scene, files
-
-
-def _person(p) -> Person:
-    return Person(
-        id=p.id,
-        joints=[
-            Joint(name=name, position=tuple(map(float, xyz)), confidence=float(c))
-            for name, xyz, c in zip(JOINTS, p.joints, p.confidence, strict=True)
-        ],
-        views=[Support(view=v, box=tuple(map(float, p.boxes[v])), score=p.scores[v]) for v in p.support],
-    )
-
-
-def _encode(result: SceneResult, decode_ms: float, t_start: float) -> bytes:
-    t0 = time.perf_counter()
-    out = SceneOut(
-        mode=result.mode,
-        persons=[_person(p) for p in result.persons],
-        timings=Timings(decode=decode_ms, encode=0.0, total=0.0, **result.timings),
-    )
-    out.model_dump_json()
-    # The encode time is measured on a first serialisation; the response carries it in the second.
-    out.timings.encode = (time.perf_counter() - t0) * 1e3
-    out.timings.total = (time.perf_counter() - t_start) * 1e3
-    return out.model_dump_json().encode()
 
 
 @protected.post(
@@ -175,8 +215,9 @@ def _encode(result: SceneResult, decode_ms: float, t_start: float) -> bytes:
     "(reference-box mode). Every 3D coordinate in the response is in mm in the reference frame.",
     openapi_extra={"requestBody": {"required": True, "content": {_MULTIPART: _SCENE_BODY}}},
 )
-async def post_scene(request: Request, pipeline: PipelineDep, settings: SettingsDep, _: Admitted) -> Response:
+async def post_scene(request: Request, pipeline: PipelineDep, settings: SettingsDep) -> Response:
     t_start = time.perf_counter()
+    # Receiving the body holds a receiving place (service.limits), never an inference slot.
     scene_text, files = await _read_form(request, settings)
     if scene_text is None:
         raise InputError("missing form part 'scene' (the JSON with the views' cameras)")
@@ -186,20 +227,26 @@ async def post_scene(request: Request, pipeline: PipelineDep, settings: Settings
     def decode():
         return validate_scene(parse_scene(scene_text, limits), files, limits, need_color)
 
-    scene = await anyio.to_thread.run_sync(decode)
-    decode_ms = (time.perf_counter() - t_start) * 1e3
-    if scene.boxes is None and pipeline.detector is None:
-        raise InputError(
-            'this server runs without a detector (no detector weights loaded, or ORPOSE_LOAD_DETECTOR=false): send reference boxes (per view "boxes", optionally "person_ids")'
-        )
+    async with inference_slot(request, settings):
+        scene = await anyio.to_thread.run_sync(decode)
+        decode_ms = (time.perf_counter() - t_start) * 1e3
+        if scene.boxes is None and pipeline.detector is None:
+            raise InputError(
+                'this server runs without a detector (no detector weights loaded, or ORPOSE_LOAD_DETECTOR=false): send reference boxes (per view "boxes", optionally "person_ids")'
+            )
 
-    def infer() -> SceneResult:
+        def infer() -> SceneResult:
+            try:
+                return pipeline.run(scene.views, scene.boxes, scene.person_ids)
+            except InputError:
+                raise
+            except ValueError as exc:  # the models' own checks on what validation let through
+                raise InputError(f"the scene could not be processed: {exc}") from None
+
         try:
-            return pipeline.run(scene.views, scene.boxes, scene.person_ids)
-        except InputError:
-            raise
-        except ValueError as exc:  # the models' own checks on what validation let through
-            raise InputError(f"the scene could not be processed: {exc}") from None
-
-    result = await anyio.to_thread.run_sync(infer, limiter=request.app.state.inference_limiter)
-    return Response(_encode(result, decode_ms, t_start), media_type="application/json")
+            result = await run_until_disconnected(
+                request.receive, infer, limiter=request.app.state.inference_limiter
+            )
+        except ClientGone as exc:  # nobody reads this answer; it keeps the access log truthful
+            raise HTTPException(400, str(exc)) from None
+    return Response(encode(result, scene, decode_ms, t_start), media_type="application/json")

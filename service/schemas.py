@@ -15,13 +15,26 @@ from pydantic import BaseModel, ConfigDict, Field
 from posenet.skeleton import JOINTS
 
 # Fixed-length lists, not tuples: FastAPI writes tuples as OpenAPI 3.0 `items` arrays, which 3.1 rejects.
-Box = Annotated[list[float], Field(min_length=4, max_length=4)]
+# Every input number is bounded to what is physically meaningful, so that nothing a client sends can overflow
+# the arithmetic downstream (fx = 5e-324 or a translation of 1e308 once gave NaN joints in a 200 response).
+MAX_PIXELS_COORD = 1e5  # pixel coordinates and focal lengths: no camera has 100 000 pixels across
+MAX_TRANSLATION_MM = 1e5  # 100 m: far beyond any operating room
+MAX_DISTORTION = 100.0  # |OpenCV coefficient|; real calibrations stay within about 20 (MVOR's largest: 13.3)
+MAX_PERSON_ID = 2**53 - 1  # the largest integer that every JSON reader (IEEE doubles) holds exactly
+
+PixelCoord = Annotated[float, Field(ge=-MAX_PIXELS_COORD, le=MAX_PIXELS_COORD)]
+Box = Annotated[list[PixelCoord], Field(min_length=4, max_length=4)]
 Vector3 = Annotated[list[float], Field(min_length=3, max_length=3)]
-Size = Annotated[list[int], Field(min_length=2, max_length=2)]
-Distortion = Annotated[list[float], Field(min_length=5, max_length=5)]
-Matrix4 = Annotated[
-    list[Annotated[list[float], Field(min_length=4, max_length=4)]], Field(min_length=4, max_length=4)
+Size = Annotated[list[Annotated[int, Field(ge=1, le=65535)]], Field(min_length=2, max_length=2)]
+Distortion = Annotated[
+    list[Annotated[float, Field(ge=-MAX_DISTORTION, le=MAX_DISTORTION)]], Field(min_length=5, max_length=5)
 ]
+# Rotation entries lie in [-1, 1] (the rigidity check), translations within MAX_TRANSLATION_MM.
+MatrixEntry = Annotated[float, Field(ge=-MAX_TRANSLATION_MM, le=MAX_TRANSLATION_MM)]
+Matrix4 = Annotated[
+    list[Annotated[list[MatrixEntry], Field(min_length=4, max_length=4)]], Field(min_length=4, max_length=4)
+]
+PersonId = Annotated[int, Field(ge=0, le=MAX_PERSON_ID)]
 
 
 # ----------------------------------------------------------------------------------------------- request
@@ -30,23 +43,34 @@ class CameraIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
-    fx: float = Field(..., gt=0, description="focal length along x, pixels (MVOR: focallength[0])")
-    fy: float = Field(..., gt=0, description="focal length along y, pixels (MVOR: focallength[1])")
+    fx: float = Field(
+        ..., ge=1, le=MAX_PIXELS_COORD, description="focal length along x, pixels (MVOR: focallength[0])"
+    )
+    fy: float = Field(
+        ..., ge=1, le=MAX_PIXELS_COORD, description="focal length along y, pixels (MVOR: focallength[1])"
+    )
     cx: float = Field(
-        ..., description="principal point x, pixels (MVOR: principalpoint[0]); inside the image"
+        ...,
+        ge=0,
+        le=MAX_PIXELS_COORD,
+        description="principal point x, pixels (MVOR: principalpoint[0]); inside the image",
     )
     cy: float = Field(
-        ..., description="principal point y, pixels (MVOR: principalpoint[1]); inside the image"
+        ...,
+        ge=0,
+        le=MAX_PIXELS_COORD,
+        description="principal point y, pixels (MVOR: principalpoint[1]); inside the image",
     )
     distortion: Distortion | None = Field(
         None,
-        description="OpenCV order (k1, k2, p1, p2, k3), or null for an ideal pinhole. MVOR stores "
+        description="OpenCV order (k1, k2, p1, p2, k3), each within +-100, or null for an ideal pinhole. "
+        "MVOR stores "
         "(k1, k2, k3, p1, p2) and its own 3D annotations ignore distortion: send null for MVOR.",
     )
     extrinsics: Matrix4 = Field(
         ...,
         description="4x4 rigid transform T(view->reference), row-major, translation in mm: p_ref = R "
-        "p_view + t. "
+        "p_view + t, each entry within +-1e5 (translations up to 100 m). "
         "The reference frame is the one these transforms map into; with MVOR's calibration "
         "(cameras_info.camParams.extrinsics[v] reshaped to 4x4) it is camera 0's, whose T is the identity.",
     )
@@ -64,20 +88,24 @@ class ViewIn(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     camera: CameraIn = Field(..., description="the calibration of this view's camera")
+    # 0.01 to 100 mm per unit: the 16-bit range then spans 0.65 m to 6.5 km.
     depth_scale_mm: float = Field(
         1.0,
-        gt=0,
+        ge=0.01,
+        le=100.0,
         description="millimetres per depth unit of the 16-bit depth PNG (1.0: the PNG holds mm; "
-        "0.1 for 1/10 mm). Depth 0 means unknown.",
+        "0.1 for 1/10 mm), 0.01 to 100. Depth 0 means unknown.",
     )
     boxes: list[Box] | None = Field(
         None,
-        description="reference person boxes in this view, (x0, y0, x1, y1) pixels. When any view has boxes, "
+        description="reference person boxes in this view, (x0, y0, x1, y1) pixels (a box partly outside the "
+        "image is clipped to it for the computation and returned as sent). When any view has boxes, "
         "detection is skipped for every view (reference-box mode; a view with null or [] has no person).",
     )
-    person_ids: list[int] | None = Field(
+    person_ids: list[PersonId] | None = Field(
         None,
-        description="optional identity of each box (same length as boxes): boxes with the same id in "
+        description="optional identity of each box (same length as boxes), an integer from 0 to 2^53 - 1: "
+        "boxes with the same id in "
         "different views are the same person. Without ids, boxes are grouped across views by the 3D matcher.",
     )
 
@@ -154,6 +182,11 @@ class SceneOut(BaseModel):
         description="the frame and unit of every 3D coordinate in this response",
     )
     persons: list[Person] = Field(..., description="everyone found in the frame (empty when nobody is)")
+    notes: list[str] = Field(
+        default_factory=list,
+        description="why something is missing: a view without valid depth, or a person (by id) whose "
+        "boxes hold no valid depth and who is therefore left out",
+    )
     timings: Timings = Field(..., description="server milliseconds per stage of this request")
 
 

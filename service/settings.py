@@ -30,6 +30,20 @@ class Settings(BaseSettings):
     # Requests admitted at once (running + waiting for a worker). Beyond it: 503 with Retry-After, never a
     # queue.
     max_in_flight: int = Field(4, ge=1, le=1024, description="requests to /scenes admitted at once")
+    # Connections still sending their body are bounded apart from the in-flight requests: a slow upload holds
+    # one of these, never an inference slot. Worst-case memory: max_receiving x max_body_bytes.
+    max_receiving: int = Field(
+        32, ge=1, le=4096, description="requests receiving their body at once (beyond it: 503)"
+    )
+    # The pose network runs every person x view crop, so its time and memory grow with persons x views x crop
+    # pixels. 96 crops of 96x96 take about 3 s and 1.2 GB (server RSS, both models) on 2 CPU cores; see
+    # docs/service.md. In detector mode the best-supported persons that fit are kept.
+    max_pose_pixels: int = Field(
+        96 * 96 * 96,
+        ge=1,
+        description="most persons x views x network-input pixels per frame (beyond it: 422 with boxes, "
+        "the best-supported persons that fit in detector mode)",
+    )
     retry_after_s: int = Field(1, ge=1, le=3600, description="Retry-After seconds sent with a 503")
     # 3 views of 640x480 PNG colour + depth are about 2-3 MB; 64 MiB leaves room for 8 large views.
     max_body_bytes: int = Field(64 * 2**20, ge=1024, description="largest accepted request body, bytes")
@@ -39,7 +53,13 @@ class Settings(BaseSettings):
     max_image_pixels: int = Field(1920 * 1200, ge=1, description="largest accepted image, width x height")
     max_boxes_per_view: int = Field(64, ge=1, description="most reference boxes in one view")
     token: SecretStr | None = Field(
-        None, description="bearer token; when set every route but /health needs it"
+        None,
+        description="bearer token; when set every route but /health needs it (the docs too, unless "
+        "public_docs)",
+    )
+    # With a token the docs and the schema need it too, unless this says they are public.
+    public_docs: bool = Field(
+        False, description="serve /docs, /redoc and /openapi.json without the token (when a token is set)"
     )
     # Unset: load the detector when a checkpoint is given or shipped weights exist; otherwise serve reference-box
     # mode only (detector-mode requests then get a 422 that says so) rather than refusing to start.

@@ -39,11 +39,14 @@ class ValidatedScene:
         views: V views (colour (H, W, 3) uint8 RGB or None, depth (H, W) uint16 mm, Camera).
         boxes: per view (K_v, 4) float32 xyxy reference boxes, or None for detector mode.
         person_ids: per view (K_v,) int64 client identities of the boxes, or None (match across views).
+        sent_boxes: per view (K_v, 4) float64 boxes as the client sent them (``boxes`` is clipped to the
+            image), or None: the response reports these.
     """
 
     views: list[FrameView]
     boxes: list[np.ndarray] | None
     person_ids: list[np.ndarray] | None
+    sent_boxes: list[np.ndarray] | None = None
 
 
 def parse_scene(text: str | bytes, limits: Limits) -> SceneIn:
@@ -89,7 +92,8 @@ def _camera(view: ViewIn, i: int, width: int, height: int) -> Camera:
 def _boxes(
     view: ViewIn, i: int, width: int, height: int, limits: Limits
 ) -> tuple[np.ndarray, np.ndarray | None]:
-    boxes = np.asarray(view.boxes or [], dtype=np.float32).reshape(-1, 4)  # (K, 4)
+    """The view's boxes clipped to its image (K, 4) float32, and its person ids (K,) int64 or None."""
+    boxes = np.asarray(view.boxes or [], dtype=np.float64).reshape(-1, 4)  # (K, 4)
     if len(boxes) > limits.max_boxes_per_view:
         raise InputError(f"views[{i}].boxes has {len(boxes)} boxes, more than {limits.max_boxes_per_view}")
     bad = (boxes[:, 2] <= boxes[:, 0]) | (boxes[:, 3] <= boxes[:, 1])
@@ -195,8 +199,14 @@ def _validated(
         boxes, ids = _boxes(view, i, width, height, limits)
         all_boxes.append(boxes)
         all_ids.append(ids)
+    if not any(v.depth.any() for v in views):
+        raise InputError(
+            "every depth image holds only 0 (unknown), so no person can be lifted to 3D: send the sensor's "
+            "16-bit depth in mm (check that the depth files are not blank and depth_scale_mm is right)"
+        )
     if not reference_mode:
         return ValidatedScene(views, None, None)
     has_ids = any(ids is not None for ids in all_ids)
     ids = [np.zeros(0, np.int64) if x is None else x for x in all_ids] if has_ids else None
-    return ValidatedScene(views, all_boxes, ids)
+    sent = [np.asarray(v.boxes or [], dtype=np.float64).reshape(-1, 4) for v in scene.views]
+    return ValidatedScene(views, all_boxes, ids, sent)

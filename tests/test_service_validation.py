@@ -160,3 +160,33 @@ def test_colour_optional_only_for_depth_models_with_boxes():
     assert validate(views, parts(1, color_0=None), need_color=False).views[0].color is None
     with pytest.raises(InputError, match="detection needs colour"):
         validate([{"camera": camera()}], parts(1, color_0=None), need_color=False)
+
+
+def test_a_non_finite_estimate_is_never_sent_as_null():
+    # The inputs are bounded so that this should not happen; if the models still give NaN, the client gets a
+    # 422 that says what to check rather than a 200 whose numbers are null.
+    from service.pipeline import PersonResult, SceneResult
+    from service.response import encode
+
+    scene = validate([{"camera": camera(), "boxes": [[1, 2, 30, 40]], "person_ids": [7]}], parts(1))
+    joints = np.zeros((10, 3))
+    joints[3, 1] = np.nan
+    person = PersonResult(7, joints, np.ones(10), [scene.boxes[0][0]], [None])
+    result = SceneResult("reference_boxes", [person], {"detect": 0.0, "match": 0.0, "pose": 1.0})
+    with pytest.raises(InputError, match="person 7 is not finite: check the cameras") as err:
+        encode(result, scene, 1.0, 0.0)
+    assert err.value.status == 422
+    person.joints = np.zeros((10, 3))
+    out = json.loads(encode(result, scene, 1.0, 0.0))
+    assert out["persons"][0]["views"][0]["box"] == [1, 2, 30, 40] and out["notes"] == []
+
+
+def test_boxes_partly_outside_are_clipped_and_kept_as_sent():
+    sent = [-20.5, 5.0, 80.25, 40.0]  # the image is 64 wide
+    scene = validate([{"camera": camera(), "boxes": [sent], "person_ids": [2]}], parts(1))
+    assert scene.boxes[0].tolist() == [[0, 5, W - 1, 40]] and scene.sent_boxes[0].tolist() == [sent]
+
+
+def test_all_zero_depth_says_why_nobody_can_be_found():
+    with pytest.raises(InputError, match="every depth image holds only 0"):
+        validate([{"camera": camera()}], parts(1, depth_0=png(np.zeros((H, W), np.uint16))))

@@ -1,0 +1,97 @@
+"""From the pipeline's result to the ``SceneOut`` body: checked, in the client's terms, with the reasons for
+anything left out.
+
+- Every number is checked to be finite before it is sent: the schema promises numbers, and a NaN would be
+  written as ``null``. A non-finite estimate is answered 422 with what to check (the inputs are bounded, so
+  it should not happen; if it does, the cause is in the calibration or the depth, not in the server).
+- Boxes are reported as the client sent them. Validation clips a box that is partly outside its image for
+  the computation (``ValidatedScene.sent_boxes`` keeps the originals).
+- ``notes`` say why persons are missing: a view without valid depth, or a person (by id) whose boxes hold no
+  valid depth.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from posenet.skeleton import JOINTS
+from service.errors import InputError
+from service.pipeline import PersonResult, SceneResult
+from service.schemas import Joint, Person, SceneOut, Support, Timings
+from service.validation import ValidatedScene
+
+
+def _restore_sent_boxes(persons: list[PersonResult], scene: ValidatedScene) -> None:
+    """Replace each person's (clipped) reference boxes with the boxes as sent, in place."""
+    if scene.boxes is None:
+        return
+    used: list[set[int]] = [set() for _ in scene.boxes]
+    for person in persons:
+        for v, box in enumerate(person.boxes):
+            if box is None:
+                continue
+            if scene.person_ids is not None:  # the id names the box
+                k = int(np.flatnonzero(scene.person_ids[v] == person.id)[0])
+            else:  # the first unused box with these clipped coordinates
+                k = next(
+                    k
+                    for k in range(len(scene.boxes[v]))
+                    if k not in used[v] and np.array_equal(scene.boxes[v][k], box)
+                )
+            used[v].add(k)
+            person.boxes[v] = scene.sent_boxes[v][k]
+
+
+def _notes(persons: list[PersonResult], scene: ValidatedScene) -> list[str]:
+    notes = [
+        f"depth_{v} holds no valid depth (every pixel is 0, unknown): view {v} supports nobody"
+        for v, view in enumerate(scene.views)
+        if not view.depth.any()
+    ]
+    if scene.person_ids is not None:
+        found = {p.id for p in persons}
+        missing = sorted({int(i) for ids in scene.person_ids for i in ids} - found)
+        notes += [
+            f"person {pid} is left out: its boxes hold no valid depth (0 = unknown) in any view, so nothing "
+            "can be lifted to 3D"
+            for pid in missing
+        ]
+    return notes
+
+
+def _checked(person: PersonResult) -> Person:
+    if not (np.isfinite(person.joints).all() and np.isfinite(person.confidence).all()):
+        raise InputError(
+            f"the 3D estimate of person {person.id} is not finite: check the cameras (fx, fy, distortion, "
+            "extrinsics with translations in mm) and depth_scale_mm"
+        )
+    return Person(
+        id=person.id,
+        joints=[
+            Joint(name=name, position=[float(x) for x in xyz], confidence=float(c))
+            for name, xyz, c in zip(JOINTS, person.joints, person.confidence, strict=True)
+        ],
+        views=[
+            Support(view=v, box=[float(x) for x in person.boxes[v]], score=person.scores[v])
+            for v in person.support
+        ],
+    )
+
+
+def encode(result: SceneResult, scene: ValidatedScene, decode_ms: float, t_start: float) -> bytes:
+    """The response body of ``result``; ``t_start``: the request's perf_counter start (for ``total``)."""
+    t0 = time.perf_counter()
+    _restore_sent_boxes(result.persons, scene)
+    out = SceneOut(
+        mode=result.mode,
+        persons=[_checked(p) for p in result.persons],
+        notes=_notes(result.persons, scene),
+        timings=Timings(decode=decode_ms, encode=0.0, total=0.0, **result.timings),
+    )
+    out.model_dump_json()
+    # The encode time is measured on a first serialisation; the response carries it in the second.
+    out.timings.encode = (time.perf_counter() - t0) * 1e3
+    out.timings.total = (time.perf_counter() - t_start) * 1e3
+    return out.model_dump_json().encode()
