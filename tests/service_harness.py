@@ -8,6 +8,7 @@ loads trained weights. The server is a separate ``uvicorn service.app:app`` proc
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import socket
 import subprocess
@@ -54,6 +55,11 @@ def tiny_checkpoints(folder: Path, seed: int = 0, detector: bool = True) -> tupl
     det = folder / "detector"
     save_detector(det, build_detector(det_cfg), det_cfg, train={"data": "random init (tests)"})
     return pose, det
+
+
+def form_kwargs(scene: dict, files: list) -> dict:
+    """httpx keyword arguments of a /scenes form: the ``scene`` JSON part and the file parts."""
+    return {"data": {"scene": json.dumps(scene)}, "files": files}
 
 
 def free_port() -> int:

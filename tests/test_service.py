@@ -20,7 +20,7 @@ import httpx
 import numpy as np
 import pytest
 from conftest import write_tiny_mvor
-from service_harness import REPO_ROOT, Server, tiny_checkpoints
+from service_harness import REPO_ROOT, Server, form_kwargs, tiny_checkpoints
 
 from posenet.data.mvor import MvorDataset
 from posenet.skeleton import JOINTS
@@ -82,10 +82,6 @@ def crowd(scene, files, persons, views=3, ids=True, source=(0, 1, 2, 0)):
             (f"depth_{v}", parts[f"depth_{source[v]}"]),
         ]
     return {"views": out_views}, out_files
-
-
-def form_kwargs(scene: dict, files: list) -> dict:
-    return {"data": {"scene": json.dumps(scene)}, "files": files}
 
 
 def raw_request(client: httpx.Client, **kwargs) -> bytes:
