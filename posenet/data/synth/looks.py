@@ -148,11 +148,11 @@ def random_shape(rng: np.random.Generator) -> BodyShape:
         hand=part(34, 0.85, 1.15),
         leg=tuple(part(r) for r in (82.0, 56.0, 54.0, 38.0)),
         shoe=part(42, 0.85, 1.15),
-        skirt_side=u(60, 170),
-        skirt_depth=u(110, 200),
-        skirt_extra=u(0, 180),
-        apron_side=u(30, 90),
-        apron_depth=u(80, 115),
+        skirt_side=u(70, 140),
+        skirt_depth=u(110, 170),
+        skirt_extra=u(0, 150),
+        apron_side=u(30, 75),
+        apron_depth=u(70, 105),
         apron_height=u(0.6, 0.85),
         offsets=random_offsets(rng),
     )
@@ -185,7 +185,7 @@ def _textile(rng: np.random.Generator) -> np.ndarray:
 def random_outfit(rng: np.random.Generator, role: str = "clinician") -> Outfit:
     """Skin from a continuous range of tones; scrubs, gowns and caps of any OR textile; textures 0.01-0.14;
     caps 75 % (10 % of them hoods), otherwise hair (six colours, buns); masks 70 %, gloves 60 %, gowns 35 %,
-    lead aprons 20 %; looseness 0.85-1.25."""
+    lead aprons 20 %; looseness 0.88-1.18."""
     t = rng.uniform() ** 0.8
     skin = _material(SKIN_LIGHT * (1 - t) + SKIN_DARK * t, rng, (0.01, 0.04))
     hair = _material(HAIR[rng.integers(len(HAIR))], rng, (0.05, 0.15))
@@ -222,7 +222,7 @@ def random_outfit(rng: np.random.Generator, role: str = "clinician") -> Outfit:
         shoes,
         gown=bool(rng.random() < 0.35),
         apron=apron,
-        bulk=float(rng.uniform(0.85, 1.25)),
+        bulk=float(rng.uniform(0.88, 1.18)),
         hair=hair,
         hair_bun=bool(rng.random() < 0.25),
         hood=bool(cap is not None and rng.random() < 0.1),
