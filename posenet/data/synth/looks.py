@@ -380,14 +380,3 @@ def alt_scene() -> tuple[SceneLook, Lighting]:
         specular_gain=0.5,
     )
     return SceneLook("alt", depth, colour, room_gain=np.array([0.85, 0.95, 1.05])), lighting
-
-
-def describe(name: str) -> dict:
-    """A json-able summary of a look, for ``synth_config.json``."""
-    if name == "twin":
-        return {"look": "twin", "body": "twin", "depth_model": "structured_light (twin defaults)"}
-    if name == "random":
-        return {"look": "random", "drawn": "per scene and per person, see posenet/data/synth/looks.py"}
-    scene, _ = alt_scene()
-    return {"look": "alt", "body": "alt (body_alt.py)", "depth_model": scene.depth.model,
-            "shading": scene.colour.diffuse, "tonemap": scene.colour.tonemap}  # fmt: skip
