@@ -13,7 +13,7 @@ from conftest import MVOR_CAMERAS_INFO
 from posenet.cameras import Camera, rigid_inverse
 from posenet.rig import formats
 from posenet.rig.__main__ import main, read_rig
-from posenet.rig.check import depth_agreement, sanity_checks
+from posenet.rig.check import camera_agreement, depth_agreement, find_floor, lift_depth, sanity_checks
 from posenet.rig.geometry import check_direction
 from posenet.rig.picture import draw_rig
 from posenet.rig.rigfile import Rig, read_rig_json, rig_difference
@@ -235,9 +235,29 @@ def test_depth_agreement_finds_a_miscalibrated_camera(mvor_file):
     shift[2, 3] = 150.0  # camera 2 believed 15 cm higher than it is (a shift along the floor would not show)
     moved = Rig([*small.cameras[:2], Camera(small.cameras[2].intrinsics, shift @ small.cameras[2].extrinsics, None,
                                             small.cameras[2].size)], small.names)  # fmt: skip
-    bad = {r["pair"]: r for r in depth_agreement(moved, depths, stride=2)}
+    pairs = depth_agreement(moved, depths, stride=2)
+    bad = {r["pair"]: r for r in pairs}
     assert bad[(0, 1)]["median_abs_mm"] < 15
     assert bad[(0, 2)]["median_abs_mm"] > 30 and bad[(2, 0)]["within"] < 0.7
+    per_camera = camera_agreement(pairs, 3)
+    assert per_camera[2] == min(per_camera)  # the moved camera is the odd one out
+
+
+def test_floor_is_found_in_the_depth_frames(mvor_file):
+    # In camera 0's frame, with only the cameras' image-up axes as a guess, the floor (room z = -1000) is recovered.
+    room = formats.read_mvor(mvor_file).to_room_frame()
+    small = Rig([c.scale(0.25) for c in room.cameras], room.names)
+    depths = _render_room(small)
+    first = small.to_first_camera()
+    points = torch.cat([lift_depth(c, d, stride=2) for c, d in zip(first.cameras, depths, strict=True)])
+    guess = -torch.stack([c.extrinsics[:3, 1] for c in first.cameras]).mean(0)
+    normal, height, share = find_floor(points, guess)
+    room_z = small.cameras[0].extrinsics[:3, :3].T @ torch.tensor(
+        [0, 0, 1.0], dtype=torch.float64
+    )  # in camera 0
+    assert float(normal @ room_z) > 0.9999 and share > 0.3
+    camera_height = float(first.cameras[0].position @ normal) - height
+    assert abs(camera_height - (float(small.cameras[0].position[2]) + 1000)) < 5
 
 
 def test_check_cli_writes_the_picture(mvor_file, tmp_path, capsys):
@@ -247,3 +267,35 @@ def test_check_cli_writes_the_picture(mvor_file, tmp_path, capsys):
     assert (tmp_path / "p.png").stat().st_size > 10_000
     drawn = draw_rig(formats.read_mvor(mvor_file), tmp_path / "q.png", resolution_mm=200)
     assert drawn["coverage"][3] > 1.0  # m2 of the working plane that all three MVOR cameras see
+
+
+def test_check_cli_with_depth_frames(mvor_file, tmp_path, capsys):
+    import cv2
+
+    from posenet.rig.rigfile import write_rig_json
+
+    room = formats.read_mvor(mvor_file).to_room_frame()
+    small = Rig([c.scale(0.25) for c in room.cameras], room.names)
+    frames = []
+    for v, d in enumerate(_render_room(small)):
+        frames.append(tmp_path / f"d{v}.png")
+        cv2.imwrite(str(frames[-1]), d)
+    write_rig_json(small.to_first_camera(), tmp_path / "rig.json")
+    argv = [
+        "check",
+        str(tmp_path / "rig.json"),
+        "--picture",
+        str(tmp_path / "p.png"),
+        "--stride",
+        "2",
+        "--depth-frames",
+    ]
+    assert main(argv + [str(f) for f in frames]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "OK   floor:" in out
+        and "up: floor fitted to the depth frames" in out
+        and "per camera, mean within" in out
+    )
+    assert main(argv + [str(frames[0])]) == 2  # one frame for three cameras is refused
+    assert "1 depth frames for 3 cameras" in capsys.readouterr().err

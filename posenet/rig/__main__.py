@@ -95,31 +95,66 @@ def check(args: argparse.Namespace) -> int:
     import cv2
     import torch
 
-    from posenet.rig.check import AGREE_MM, depth_agreement, sanity_checks
-    from posenet.rig.picture import draw_rig
+    from posenet.rig.check import (
+        AGREE_MM,
+        camera_agreement,
+        depth_agreement,
+        find_floor,
+        lift_depth,
+        sanity_checks,
+    )
+    from posenet.rig.picture import draw_rig, up_vector
 
     rig = read_rig(args.format, [args.rig])
     results = sanity_checks(rig)
     for level, message in results:
         print(f"{level:4s} {message}")
     up = None if args.up is None else torch.tensor(args.up, dtype=torch.float64)
+    depths = []
+    for p in args.depth_frames or []:
+        d = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        if d is None or d.dtype != "uint16" or d.ndim != 2:
+            raise ValueError(f"depth frame {p} is not a single-channel 16-bit image (uint16 mm)")
+        depths.append(d)
+    if depths and len(depths) != len(rig):
+        raise ValueError(
+            f"{len(depths)} depth frames for {len(rig)} cameras: give one per camera, in rig order"
+        )
+    floor, up_source = None, None
+    if depths and up is None:
+        drawn_rig, guess, _ = up_vector(rig)
+        points = torch.cat(
+            [lift_depth(c, d, stride=8) for c, d in zip(drawn_rig.cameras, depths, strict=True)]
+        )
+        found = find_floor(points, guess)
+        if found is None:
+            print(
+                "WARN floor: no large surface below the cameras in the depth frames; up estimated without it"
+            )
+        else:
+            up, floor, share = found
+            rig, up_source = drawn_rig, "floor fitted to the depth frames"
+            heights = ", ".join(f"{(float(c.position @ up) - floor) / 1000:.2f}" for c in rig.cameras)
+            print(
+                f"OK   floor: {100 * share:.0f} % of the depth points lie within 40 mm of a plane; cameras {heights} m above it"
+            )
     picture = args.picture or args.rig.with_suffix(".png")
-    drawn = draw_rig(rig, picture, up=up, title=args.title)
+    drawn = draw_rig(rig, picture, up=up, title=args.title, floor_mm=floor, up_source=up_source)
     cover = ", ".join(f">={k} views {a:.1f} m2" for k, a in drawn["coverage"].items())
     print(f"picture: {picture} (up: {drawn['up_source']}; working plane coverage {cover})")
     failed = any(level == "FAIL" for level, _ in results)
-    if args.depth_frames:
-        depths = []
-        for p in args.depth_frames:
-            d = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-            if d is None or d.dtype != "uint16" or d.ndim != 2:
-                raise SystemExit(f"depth frame {p} is not a single-channel 16-bit image (uint16 mm)")
-            depths.append(d)
+    if depths:
         print(f"depth agreement (view i's points in view j; |diff| < {AGREE_MM:.0f} mm counts as agreeing):")
-        for r in depth_agreement(rig, depths, stride=args.stride):
+        pairs = depth_agreement(rig, depths, stride=args.stride)
+        for r in pairs:
             i, j = r["pair"]
             print(f"  {i} -> {j}: overlap {100 * r['overlap']:5.1f} %, median |diff| {r['median_abs_mm']:6.1f} mm, "
                   f"median diff {r['median_mm']:+6.1f} mm, within {100 * r['within']:5.1f} %")  # fmt: skip
+        per_camera = camera_agreement(pairs, len(rig))
+        print(
+            "  per camera, mean within over its pairs: "
+            + ", ".join(f"{v}: {100 * a:.1f} %" for v, a in enumerate(per_camera))
+        )
     return 1 if failed else 0
 
 

@@ -101,6 +101,15 @@ def lift_depth(camera: Camera, depth: np.ndarray, stride: int = 4) -> torch.Tens
     return camera.unproject(grid[keep], d[keep])[1]
 
 
+def camera_agreement(results: list[dict], V: int) -> list[float]:
+    """Per camera, the mean share of agreeing points over the pairs it is part of (the odd one out scores lowest)."""
+    out = []
+    for v in range(V):
+        shares = [r["within"] for r in results if v in r["pair"] and r["within"] == r["within"]]
+        out.append(sum(shares) / len(shares) if shares else float("nan"))
+    return out
+
+
 def depth_agreement(rig: Rig, depths: list[np.ndarray], stride: int = 4) -> list[dict]:
     """Per ordered view pair (i, j): how view i's depth points agree with view j's depth where j sees them.
 
@@ -143,3 +152,35 @@ def depth_agreement(rig: Rig, depths: list[np.ndarray], stride: int = 4) -> list
                 "within": float((diff.abs() < AGREE_MM).float().mean()) if len(diff) else float("nan"),
             })  # fmt: skip
     return out
+
+
+def find_floor(
+    points: torch.Tensor, up: torch.Tensor, tries: int = 400, seed: int = 0
+) -> tuple[torch.Tensor, float, float] | None:
+    """The floor in reference-frame points ``(N, 3)``: (unit normal (3,), height along it, share of inliers).
+
+    RANSAC over planes through three of the lower half of the points (along the guessed ``up``) whose normal is
+    within 40 degrees of ``up``: the plane with the most points within 40 mm wins and is refitted to them. None when
+    no such plane holds 5 % of the points.
+    """
+    up = up / up.norm()
+    low = points[(points @ up) <= (points @ up).median()]
+    if len(low) < 3:
+        return None
+    g = torch.Generator().manual_seed(seed)
+    tri = low[torch.randint(len(low), (tries, 3), generator=g)]  # (T, 3, 3)
+    normal = torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+    normal = normal * torch.sign(normal @ up).unsqueeze(-1)  # (T, 3), pointing up
+    offset = (normal * tri[:, 0]).sum(-1)  # (T,)
+    inliers = ((points @ normal.T) - offset).abs() < 40  # (N, T)
+    score = inliers.sum(0) * ((normal @ up) > math.cos(math.radians(40)))
+    best = int(score.argmax())
+    if int(score[best]) < 0.05 * len(points):
+        return None
+    near = points[inliers[:, best]]
+    centre = near.mean(0)
+    n = torch.linalg.svd(near - centre, full_matrices=False).Vh[-1]
+    n = n if float(n @ up) > 0 else -n
+    height = float(centre @ n)
+    return n, height, float((((points @ n) - height).abs() < 40).float().mean())

@@ -48,9 +48,15 @@ def coverage(rig: Rig, points: torch.Tensor, max_range_mm: float) -> torch.Tenso
 
 
 def draw_rig(rig: Rig, path: str | Path, up: torch.Tensor | None = None, max_range_mm: float = 8000.0,
-             title: str | None = None, resolution_mm: float = 50.0) -> dict:  # fmt: skip
-    """Write the picture to ``path`` (PNG); returns what it drew (``up``, ``plane_height_mm``, ``coverage``)."""
-    rig, up, up_source = up_vector(rig, up)
+             title: str | None = None, resolution_mm: float = 50.0, floor_mm: float | None = None,
+             up_source: str | None = None) -> dict:  # fmt: skip
+    """Write the picture to ``path`` (PNG); returns what it drew (``up``, ``plane_height_mm``, ``coverage``).
+
+    ``floor_mm``: the floor's height along ``up`` when known (``check.find_floor`` on depth frames), drawn in the
+    side view.
+    """
+    rig, up, source = up_vector(rig, up)
+    up_source = up_source or source
     up = up.to(torch.float64)
     e1 = torch.linalg.cross(up, torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64))
     if e1.norm() < 1e-3:
@@ -116,7 +122,11 @@ def draw_rig(rig: Rig, path: str | Path, up: torch.Tensor | None = None, max_ran
         ax.grid(alpha=0.3)
     top.set(xlabel="m", ylabel="m", title=f"from above: frusta cut at the working plane ({up_source})")
     side.axhline(height / 1000, color="r", lw=0.8, ls="--")
-    side.set(xlabel="m", ylabel="height along up, m", title="from the side (red: working plane)")
+    label = "from the side (red: working plane"
+    if floor_mm is not None:
+        side.axhline(floor_mm / 1000, color="k", lw=2)
+        label += ", black: floor"
+    side.set(xlabel="m", ylabel="height along up, m", title=label + ")")
     fig.suptitle(title or f"{V} cameras, frame: {rig.frame}")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
