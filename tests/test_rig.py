@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -270,8 +271,6 @@ def test_check_cli_writes_the_picture(mvor_file, tmp_path, capsys):
 
 
 def test_check_cli_with_depth_frames(mvor_file, tmp_path, capsys):
-    import cv2
-
     from posenet.rig.rigfile import write_rig_json
 
     room = formats.read_mvor(mvor_file).to_room_frame()
@@ -299,3 +298,31 @@ def test_check_cli_with_depth_frames(mvor_file, tmp_path, capsys):
     )
     assert main(argv + [str(frames[0])]) == 2  # one frame for three cameras is refused
     assert "1 depth frames for 3 cameras" in capsys.readouterr().err
+
+
+def test_reads_yaml_as_easymocap_writes_it(tmp_path):
+    # EasyMocap's own writer: %YAML:1.0, quoted names, rotation vectors only (no Rot_), no image sizes, T in metres.
+    def mat(name, rows, cols, data):
+        return f"{name}: !!opencv-matrix\n  rows: {rows}\n  cols: {cols}\n  dt: d\n  data: [{', '.join(map(str, data))}]\n"
+
+    rvec = [0.1, -0.2, 0.05]
+    R = cv2.Rodrigues(np.asarray(rvec, np.float64))[0]
+    head = '%YAML:1.0\n---\nnames:\n  - "01"\n  - "02"\n'
+    intri = head + "".join(
+        mat(f"K_{n}", 3, 3, [1000, 0, 960, 0, 1001, 540, 0, 0, 1])
+        + mat(f"dist_{n}", 1, 5, [0.01, -0.02, 0, 0, 0])
+        for n in ("01", "02")
+    )
+    extri = head + mat("R_01", 3, 1, [0, 0, 0]) + mat("T_01", 3, 1, [0, 0, 0])
+    extri += mat("R_02", 3, 1, rvec) + mat("T_02", 3, 1, [1.5, 0.0, 0.2])
+    (tmp_path / "intri.yml").write_text(intri)
+    (tmp_path / "extri.yml").write_text(extri)
+    rig = read_rig("opencv-yaml", [tmp_path])
+    assert rig.names == ["01", "02"] and rig.cameras[0].size is None
+    assert any("R_ (rotation vector)" in line for line in rig.report)
+    assert any("image sizes are unknown" in line for line in rig.report)
+    # x_cam = R x_world + T (metres): camera 02's centre is -R^T T, in mm.
+    np.testing.assert_allclose(
+        rig.cameras[1].position.numpy(), -R.T @ np.array([1.5, 0.0, 0.2]) * 1000, atol=1e-9
+    )
+    np.testing.assert_allclose(rig.cameras[1].distortion.numpy(), [0.01, -0.02, 0, 0, 0])
