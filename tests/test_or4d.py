@@ -188,3 +188,13 @@ def test_export_to_mvor_layout_reads_back_and_evaluates(tiny, tmp_path):
              for p in gt["annotations3D"]]  # fmt: skip
     result = evaluate(gt, preds)  # the ground truth scored against itself
     assert result["overall"] < 1e-3 and result["counts"]
+
+
+def test_cli_reports_and_exports(tiny, tmp_path, capsys):
+    from posenet.data.or4d import main
+
+    assert main([str(tiny[0]), "--takes", "2", "--export-mvor", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "2 annotated frames in takes [2], 6 cameras" in out and "4 poses" in out
+    assert "translations read as m" in out  # the conversion report of 4D-OR's camera files
+    assert (tmp_path / "out/take2/cam6/depth/000001.png").is_symlink()
