@@ -71,15 +71,14 @@ def test_every_format_round_trips_in_the_world_frame(mvor_file, tmp_path, fmt):
     assert rig_difference(back, rig) <= 1e-6
 
 
-def test_converted_rig_projects_mvor_joints_where_the_original_does(mvor_annotations, tmp_path, mvor_json):
-    _convert("--from", "mvor", mvor_json, "--out", tmp_path / "rig.json")
+def _projection_parity(gt: dict, path, tmp_path) -> None:
+    """MVOR's 3D joints projected with rigs converted from ``path`` land where ``Camera.from_mvor`` puts them."""
+    _convert("--from", "mvor", path, "--out", tmp_path / "rig.json")
     _convert("--to", "opencv-yaml", tmp_path / "rig.json", "--out", tmp_path / "yaml")
     _convert("--to", "4d-or", tmp_path / "rig.json", "--out", tmp_path / "4dor")
-    original = Camera.stack(Camera.from_mvor(mvor_annotations["cameras_info"]))
+    original = Camera.stack(Camera.from_mvor(gt["cameras_info"]))
     joints = torch.as_tensor(
-        np.array(
-            [np.asarray(p["keypoints3D"]).reshape(-1, 4)[:10, :3] for p in mvor_annotations["annotations3D"]]
-        )
+        np.array([np.asarray(p["keypoints3D"]).reshape(-1, 4)[:10, :3] for p in gt["annotations3D"]])
     ).reshape(-1, 3)  # (N, 3) camera-0 frame, mm
     want = original.project(joints.expand(3, -1, -1))  # (V, N, 2)
     for fmt, inputs in (
@@ -90,6 +89,16 @@ def test_converted_rig_projects_mvor_joints_where_the_original_does(mvor_annotat
         rig = read_rig(fmt, inputs).to_first_camera()
         got = rig.stacked.project(joints.expand(3, -1, -1))
         assert float((got - want).abs().max()) < 1e-6, fmt
+
+
+def test_converted_rig_projects_mvor_joints_where_the_original_does(mvor_annotations, tmp_path, mvor_json):
+    _projection_parity(mvor_annotations, mvor_json, tmp_path)  # the real file's 1,061 poses
+
+
+def test_converted_rig_projects_tiny_mvor_joints_where_the_original_does(tiny_mvor_dataset, tmp_path):
+    _projection_parity(
+        tiny_mvor_dataset.gt, tiny_mvor_dataset.annotations, tmp_path
+    )  # runs without the real file
 
 
 def test_rig_json_is_what_post_scenes_takes(mvor_file, tmp_path):
