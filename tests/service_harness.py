@@ -14,6 +14,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -60,6 +61,48 @@ def tiny_checkpoints(folder: Path, seed: int = 0, detector: bool = True) -> tupl
 def form_kwargs(scene: dict, files: list) -> dict:
     """httpx keyword arguments of a /scenes form: the ``scene`` JSON part and the file parts."""
     return {"data": {"scene": json.dumps(scene)}, "files": files}
+
+
+def raw_request(client: httpx.Client, **kwargs) -> bytes:
+    """A whole ``POST /scenes`` request (head and body) as bytes, to send over a socket of one's own."""
+    request = client.build_request("POST", "/scenes", **kwargs)
+    body = request.read()
+    head = "".join(f"{k}: {v}\r\n" for k, v in request.headers.items())
+    return f"POST /scenes HTTP/1.1\r\n{head}\r\n".encode() + body
+
+
+class Tricklers:
+    """``n`` connections that each send a /scenes head and then one body byte every ``every_s`` seconds (slow
+    uploads); ``close()`` ends them."""
+
+    def __init__(self, url: httpx.URL, n: int, token: str | None = None, every_s: float = 0.1) -> None:
+        auth = f"Authorization: Bearer {token}\r\n" if token else ""
+        self.socks = []
+        for _ in range(n):
+            sock = socket.create_connection((url.host, url.port))
+            sock.sendall(
+                f"POST /scenes HTTP/1.1\r\nHost: {url.host}\r\n{auth}Content-Type: multipart/form-data; "
+                "boundary=x\r\nContent-Length: 100000\r\n\r\n--x\r\n".encode()
+            )
+            self.socks.append(sock)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._trickle, args=(every_s,), daemon=True)
+        self.thread.start()
+        time.sleep(0.3)  # every head has been read and its route is waiting for the body
+
+    def _trickle(self, every_s: float) -> None:
+        while not self.stop.wait(every_s):
+            for sock in self.socks:
+                try:
+                    sock.sendall(b"x")
+                except OSError:
+                    pass
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join()
+        for sock in self.socks:
+            sock.close()
 
 
 def free_port() -> int:

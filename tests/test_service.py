@@ -20,7 +20,7 @@ import httpx
 import numpy as np
 import pytest
 from conftest import write_tiny_mvor
-from service_harness import REPO_ROOT, Server, form_kwargs, tiny_checkpoints
+from service_harness import REPO_ROOT, Server, form_kwargs, raw_request, tiny_checkpoints
 
 from posenet.data.mvor import MvorDataset
 from posenet.skeleton import JOINTS
@@ -82,14 +82,6 @@ def crowd(scene, files, persons, views=3, ids=True, source=(0, 1, 2, 0)):
             (f"depth_{v}", parts[f"depth_{source[v]}"]),
         ]
     return {"views": out_views}, out_files
-
-
-def raw_request(client: httpx.Client, **kwargs) -> bytes:
-    """A whole ``POST /scenes`` request (head and body) as bytes, to send over a socket of one's own."""
-    request = client.build_request("POST", "/scenes", **kwargs)
-    body = request.read()
-    head = "".join(f"{k}: {v}\r\n" for k, v in request.headers.items())
-    return f"POST /scenes HTTP/1.1\r\n{head}\r\n".encode() + body
 
 
 def check_person_shape(person: dict, width=640, height=480) -> None:

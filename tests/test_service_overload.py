@@ -7,14 +7,12 @@ and then trickle its body a byte at a time.
 
 from __future__ import annotations
 
-import socket
-import threading
 import time
 
 import httpx
 import pytest
 from conftest import write_tiny_mvor
-from service_harness import Server, form_kwargs, tiny_checkpoints
+from service_harness import Server, Tricklers, form_kwargs, tiny_checkpoints
 
 from posenet.data.mvor import MvorDataset
 from service.client import scene_request
@@ -46,41 +44,8 @@ def server(tmp_path_factory):
         yield client
 
 
-class Tricklers:
-    """``n`` connections that each send a /scenes head and then one body byte every ``every_s`` seconds."""
-
-    def __init__(self, client: httpx.Client, n: int, every_s: float = 0.1) -> None:
-        host, port = client.base_url.host, client.base_url.port
-        self.socks = []
-        for _ in range(n):
-            sock = socket.create_connection((host, port))
-            sock.sendall(
-                f"POST /scenes HTTP/1.1\r\nHost: {host}\r\nAuthorization: Bearer {TOKEN}\r\n"
-                "Content-Type: multipart/form-data; boundary=x\r\nContent-Length: 100000\r\n\r\n--x\r\n".encode()
-            )
-            self.socks.append(sock)
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._trickle, args=(every_s,), daemon=True)
-        self.thread.start()
-        time.sleep(0.3)  # every head has been read and its route is waiting for the body
-
-    def _trickle(self, every_s: float) -> None:
-        while not self.stop.wait(every_s):
-            for sock in self.socks:
-                try:
-                    sock.sendall(b"x")
-                except OSError:
-                    pass
-
-    def close(self) -> None:
-        self.stop.set()
-        self.thread.join()
-        for sock in self.socks:
-            sock.close()
-
-
 def test_sixteen_slow_uploads_do_not_delay_a_valid_request(server, frame):
-    slow = Tricklers(server, 16)
+    slow = Tricklers(server.base_url, 16, TOKEN)
     try:
         t0 = time.monotonic()
         r = server.post("/scenes", **frame)
@@ -92,7 +57,7 @@ def test_sixteen_slow_uploads_do_not_delay_a_valid_request(server, frame):
 
 
 def test_receiving_places_are_bounded_and_given_back(server, frame):
-    slow = Tricklers(server, MAX_RECEIVING)
+    slow = Tricklers(server.base_url, MAX_RECEIVING, TOKEN)
     try:
         r = server.post("/scenes", **frame)
         assert r.status_code == 503 and r.headers["retry-after"] == "1", r.text
