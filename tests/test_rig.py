@@ -14,7 +14,14 @@ from conftest import MVOR_CAMERAS_INFO
 from posenet.cameras import Camera, rigid_inverse
 from posenet.rig import formats
 from posenet.rig.__main__ import main, read_rig
-from posenet.rig.check import camera_agreement, depth_agreement, find_floor, lift_depth, sanity_checks
+from posenet.rig.check import (
+    camera_agreement,
+    depth_agreement,
+    depth_checks,
+    find_floor,
+    lift_depth,
+    sanity_checks,
+)
 from posenet.rig.geometry import check_direction
 from posenet.rig.picture import draw_rig
 from posenet.rig.rigfile import Rig, read_rig_json, rig_difference
@@ -305,6 +312,11 @@ def test_check_cli_with_depth_frames(mvor_file, tmp_path, capsys):
         and "up: floor fitted to the depth frames" in out
         and "per camera, mean within" in out
     )
+    assert "OK   depth frame 2: median" in out
+    levels = [
+        level for level, _ in depth_checks([np.full((4, 4), 250, np.uint16), np.zeros((4, 4), np.uint16)])
+    ]
+    assert levels == ["WARN", "FAIL"]  # 2.5 m in cm units reads as 250 mm; an all-unknown frame
     assert main(argv + [str(frames[0])]) == 2  # one frame for three cameras is refused
     assert "1 depth frames for 3 cameras" in capsys.readouterr().err
 

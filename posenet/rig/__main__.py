@@ -99,6 +99,7 @@ def check(args: argparse.Namespace) -> int:
         AGREE_MM,
         camera_agreement,
         depth_agreement,
+        depth_checks,
         find_floor,
         lift_depth,
         sanity_checks,
@@ -120,6 +121,9 @@ def check(args: argparse.Namespace) -> int:
         raise ValueError(
             f"{len(depths)} depth frames for {len(rig)} cameras: give one per camera, in rig order"
         )
+    for level, message in depth_checks(depths):
+        print(f"{level:4s} {message}")
+        results.append((level, message))
     floor, up_source = None, None
     if depths and up is None:
         drawn_rig, guess, _ = up_vector(rig)

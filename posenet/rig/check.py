@@ -93,6 +93,26 @@ def sanity_checks(rig: Rig) -> list[tuple[str, str]]:
     return out
 
 
+def depth_checks(depths: list[np.ndarray]) -> list[tuple[str, str]]:
+    """Whether each uint16 depth frame looks like millimetres: its median valid depth is 0.3 to 15 m."""
+    out = []
+    for i, d in enumerate(depths):
+        valid = d[d > 0]
+        if not valid.size:
+            out.append(("FAIL", f"depth frame {i}: no valid (non-zero) pixel"))
+            continue
+        median = float(np.median(valid))
+        ok = 300 <= median <= 15_000
+        hint = "" if ok else " (are the units mm? 0.1 mm or cm units would read 10x too far or too near)"
+        out.append(
+            (
+                "OK" if ok else "WARN",
+                f"depth frame {i}: median {median:.0f} mm, {100 * valid.size / d.size:.0f} % valid{hint}",
+            )
+        )
+    return out
+
+
 def lift_depth(camera: Camera, depth: np.ndarray, stride: int = 4) -> torch.Tensor:
     """(N, 3) reference-frame points of every ``stride``-th valid pixel of a (H, W) uint16 mm depth image."""
     grid = pixel_grid(*depth.shape, dtype=torch.float64)[::stride, ::stride].reshape(-1, 2)  # (N, 2)
