@@ -4,7 +4,9 @@ Each occluder is placed between a random camera and a random person (15-80 % of 
 part of someone in some view, or, for floor-standing kinds, on the floor below that point. A candidate is
 rejected (and redrawn, up to a few times) when it would stand within 40 cm of a person, reach the ceiling,
 hang within 60 cm of a camera, fill more than 35 % of an image, or cover more than 35 % of the box of a
-``protect`` (view, person) pair in front of that person (the MVOR twin's people that MVOR shows). Kinds:
+``protect`` (view, person) pair in front of that person (the MVOR twin's people that MVOR shows). An occluder
+that passes is kept only if, rendered at quarter resolution, it leaves every protected person at least 75 % of
+their visible pixels and, where it takes any, at least twice the pixels that a box needs. Kinds:
 ``random`` draws boom panels, IV poles, carts, drape screens, lamps and instrument stands; ``alt`` has its
 own supply columns, horizontal booms and shelf trolleys.
 """
@@ -101,11 +103,12 @@ def add_clutter(frame, rig: Rig, rng: np.random.Generator, kinds: tuple[str, ...
     pelvis = np.array([(p.points[F["left_hip"]] + p.points[F["right_hip"]])[:2] / 2 for p in frame.persons])
     cams = rig.cam_to_world[:, :3, 3]
     T = rig.world_to_cam()
-    sil = None
+    sil = seen = None
     if protect:
-        from posenet.data.synth.scene import silhouettes  # scene imports the looks' body models
+        from posenet.data.synth.scene import silhouettes, visible_pixels  # scene imports the body models
 
         sil = silhouettes(frame, rig)
+        seen = visible_pixels(frame, rig)
     added = 0
     for _ in range(count):
         kind = str(kinds[rng.integers(len(kinds))])
@@ -138,6 +141,21 @@ def add_clutter(frame, rig: Rig, rng: np.random.Generator, kinds: tuple[str, ...
             ):
                 continue
             frame.room.extend(prims)
+            if seen is not None:
+                now = visible_pixels(frame, rig)
+                if not all(_keeps_box(seen[k], now[k], sil[k][2]) for k in protect if k in sil):
+                    del frame.room[-len(prims) :]
+                    continue
+                seen = now
             added += 1
             break
     return added
+
+
+def _keeps_box(
+    before: int, after: int, unoccluded: int, min_pixels: int = 350, fraction: float = 0.12
+) -> bool:
+    """Whether a person who had ``before`` visible pixels keeps a safe margin over the box rule with ``after``
+    (see :class:`~posenet.data.synth.scene.VisibilityConfig`)."""
+    need = max(min_pixels, fraction * unoccluded)
+    return after >= before or (after >= 0.75 * before and after >= 2 * need)

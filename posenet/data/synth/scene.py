@@ -168,6 +168,22 @@ def silhouettes(
     return out
 
 
+def visible_pixels(frame: Frame, rig: Rig, factor: int = 4) -> dict[tuple[int, int], int]:
+    """Per (view, person): visible pixels in the whole scene, counted at 1/factor resolution (full-res
+    units)."""
+    prims = frame_primitives(frame)
+    T = rig.world_to_cam()
+    out = {}
+    for v, K in enumerate(rig.intrinsics):
+        keep = [p for p in prims if (v, p.owner) not in frame.hidden]
+        g = rasterize([p.to_camera(T[v]) for p in keep], _downscaled(K, factor))
+        owners = np.array([p.owner for p in keep], np.int32)
+        own = np.where(g.prim >= 0, owners[np.maximum(g.prim, 0)], -3)
+        counts = np.bincount(own[own >= 0].ravel(), minlength=len(frame.persons))
+        out.update({(v, i): int(c) * factor * factor for i, c in enumerate(counts)})
+    return out
+
+
 def render_view(
     frame: Frame,
     prims: list[Primitive],
