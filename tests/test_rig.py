@@ -187,6 +187,7 @@ def test_4dor_camera_files_follow_4dor_loaders(tmp_path):
         poses.append(pose @ c2d)
     rig = formats.read_4dor(paths)
     assert rig.frame == "world (4D-OR)"
+    assert any("colour-to-depth offsets 32." in line and "plausible" in line for line in rig.report)
     points_m = rng.uniform(-1, 1, (20, 3)) + [0, 0, 0.9]
     for camera, E, path in zip(rig.cameras, poses, paths, strict=True):
         cp = json.loads(path.read_text())["value0"]["color_parameters"]

@@ -243,7 +243,7 @@ def _pose(entry: dict, where: str) -> torch.Tensor:
 
 def read_4dor(paths: list[Path], distortion: str = "drop", unit: str | None = None) -> Rig:
     factor = UNITS_MM[unit or "m"]
-    cameras, names, fx_notes, dist_notes = [], [], [], []
+    cameras, names, fx_notes, dist_notes, baselines = [], [], [], [], []
     for path in paths:
         value = json.loads(path.read_text())["value0"]
         cp = value["color_parameters"]
@@ -272,6 +272,7 @@ def read_4dor(paths: list[Path], distortion: str = "drop", unit: str | None = No
         )
         size = (int(cp["width"]), int(cp["height"])) if "width" in cp and "height" in cp else None
         cameras.append(Camera.create(fx, fy, cx, cy, depth_to_world @ color_to_depth @ GL_TO_CV, D, size))
+        baselines.append(float(color_to_depth[:3, 3].norm()))
         names.append(path.stem)
     rig = Rig(cameras, names, "world (4D-OR)")
     rig.report += fx_notes
@@ -279,6 +280,22 @@ def read_4dor(paths: list[Path], distortion: str = "drop", unit: str | None = No
         f"4D-OR: colour camera = camera_pose (T(depth->world)) @ color2depth_transform @ diag(1, -1, -1) "
         f"(4D-OR's frames are y up, z back); {len(paths)} cameras"
     )
+    # A second unit check: an Azure Kinect's colour camera sits about 32 mm from its depth camera.
+    lo, hi = min(baselines), max(baselines)
+    if hi == 0:
+        rig.report.append(
+            "4D-OR: color2depth_transform is the identity in every file (colour = depth camera)"
+        )
+    else:
+        plausible = 5 <= lo and hi <= 100
+        rig.report.append(
+            f"4D-OR: colour-to-depth offsets {lo:.1f} to {hi:.1f} mm with translations read as {unit or 'm'}"
+            + (
+                " (plausible for a Kinect: about 32 mm)"
+                if plausible
+                else " (a Kinect's is about 32 mm: check the unit)"
+            )
+        )
     if dist_notes:
         rig.report.append(
             f"4D-OR: distortion in {', '.join(dist_notes)} "
