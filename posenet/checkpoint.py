@@ -66,15 +66,20 @@ def checkpoint_files(path: str | Path | None) -> tuple[Path, Path]:
     return path, path.with_suffix(".json")
 
 
-def load_checkpoint(path: str | Path | None, device: str | torch.device = "cpu") -> tuple[PoseNet, dict]:
-    """The :class:`PoseNet` of a checkpoint (in eval mode, on ``device``) and its config dict."""
+def load_checkpoint(
+    path: str | Path | None, device: str | torch.device = "cpu", precision: str = "auto"
+) -> tuple[PoseNet, dict]:
+    """The :class:`PoseNet` of a checkpoint (in eval mode, on ``device``) and its config dict.
+
+    ``precision`` (``auto``, ``fp32``, ``bf16``) is how *this* machine runs it (``posenet.execution``); whatever
+    the training machine used is ignored."""
     weights, config_file = checkpoint_files(path)
     if not config_file.is_file():
         raise FileNotFoundError(f"checkpoint {weights} has no config beside it ({config_file} is missing)")
     config = json.loads(config_file.read_text())
     if "model" not in config:
         raise ValueError(f"{config_file} has no 'model' section: not a pose-network checkpoint config")
-    model = PoseNet(ModelConfig(**config["model"]))
+    model = PoseNet(ModelConfig.from_dict({**config["model"], "precision": precision}))
     state = load_file(weights, device="cpu")
     missing, unexpected = model.load_state_dict(state, strict=False)
     if missing or unexpected:

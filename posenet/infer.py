@@ -8,8 +8,9 @@ Usage::
     pred.confidence  # (P, J) mm: the spread of each joint's 3D point cloud (see posenet.lifting)
 
 Any image size works: the input pipeline crops and resizes internally (:mod:`posenet.inputs`) and keeps the
-cameras right. Runs under ``torch.inference_mode`` with the memory format and bf16 setting of the checkpoint's
-config (channels_last + bf16 autocast measured fastest on CPU: ``benchmarks/posenet_speed.py``).
+cameras right. Runs under ``torch.inference_mode``, at the precision chosen for this machine
+(:mod:`posenet.execution`), with the U-Net on torch or on an inference runtime (``backend``,
+:mod:`posenet.runtime`); the cropping, lifting and aggregation stay in torch, in float32.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from posenet.cameras import Camera
 from posenet.checkpoint import load_checkpoint
 from posenet.inputs import build_scene
 from posenet.model import PoseNet, predict_scenes
+from posenet.runtime import Backend, OnnxRunner, export_onnx, resolve_backend
 
 Tensor = torch.Tensor
 
@@ -51,15 +53,57 @@ class PoseEstimator:
         self.device = torch.device(device)
         self.model = model.to(self.device).eval()
         self.config = config or {}
+        self.backend = Backend("torch", "the default of PoseEstimator")
 
     @classmethod
     def from_checkpoint(
-        cls, path: str | Path | None = None, device: str | torch.device = "cpu"
+        cls,
+        path: str | Path | None = None,
+        device: str | torch.device = "cpu",
+        precision: str = "auto",
+        backend: str = "torch",
+        threads: int | None = None,
     ) -> PoseEstimator:
         """Load a checkpoint folder or ``.safetensors`` file; None -> ``posenet/weights/default.safetensors``
-        (raises FileNotFoundError saying how to train or point to one when it is missing)."""
-        model, config = load_checkpoint(path, device)
-        return cls(model, config, device)
+        (raises FileNotFoundError saying how to train or point to one when it is missing).
+
+        ``precision`` and ``backend`` say how this machine runs it (``posenet.execution``, ``posenet.runtime``).
+        """
+        model, config = load_checkpoint(path, device, precision)
+        est = cls(model, config, device)
+        est.use_backend(backend, threads)
+        return est
+
+    def use_backend(self, backend: str = "auto", threads: int | None = None) -> Backend:
+        """Run the U-Net on ``backend`` from now on (exported to ONNX on first use; see ``posenet.runtime``).
+
+        A failing export or runtime falls back to torch; ``self.backend.reason`` then says why."""
+        chosen = resolve_backend(backend, self.device)
+        self.model.runner = None
+        if chosen.name != "torch":
+            try:
+                self.model.runner = OnnxRunner(
+                    self.export(), chosen.name, threads or torch.get_num_threads(), self.model.precision()
+                )
+            except Exception as exc:  # any failure of a runtime must leave a working (torch) model
+                chosen = Backend("torch", f"{chosen.name} failed ({type(exc).__name__}: {exc}); using torch")
+        self.backend = chosen
+        return chosen
+
+    def export(self, folder: Path | None = None) -> Path:
+        """The U-Net as an ONNX graph (cached by a hash of its weights; see ``posenet.runtime``)."""
+        cfg = self.model.config
+        w, h = cfg.inputs.network_size(False)
+        example = torch.zeros(2, cfg.inputs.in_channels, h, w)
+        return export_onnx(
+            self.model.unet.float(), [example], ["x"], ["heatmaps"], {"x": {0: "n"}, "heatmaps": {0: "n"}},
+            "unet", {"unet": str(cfg.unet), "size": [w, h]}, folder,
+        )  # fmt: skip
+
+    @property
+    def precision(self):
+        """The precision the U-Net runs at here (the runtime's, when one runs it)."""
+        return self.model.runner.precision if self.model.runner is not None else self.model.precision()
 
     @staticmethod
     def _boxes(person_boxes: Sequence[Sequence], V: int) -> tuple[Tensor, Tensor]:

@@ -10,6 +10,7 @@ instead (per-view 2D centre of mass, depth look-up, softmax fusion of the views)
 from __future__ import annotations
 
 import contextlib
+import functools
 from dataclasses import dataclass, field
 
 import torch
@@ -17,6 +18,7 @@ from torch import nn
 
 from posenet import augment as aug
 from posenet import lifting
+from posenet.execution import PRECISIONS, Precision, resolve_precision
 from posenet.inputs import InputConfig, SceneInput
 from posenet.unet import UNet, UNetConfig
 
@@ -30,13 +32,24 @@ class ModelConfig:
     depth: int = 3  # U-Net downsamplings; 3 suits 96x96 crops (12x12 at the bottom), 4 the paper's 320x240
     aggregation: str = "3d"  # "3d": the paper's method; "2d": its 2D-loss baseline
     eps: float = lifting.EPS_LOGIT  # the logit given to points outside the box or without depth
-    channels_last: bool = True  # measured faster on CPU (benchmarks/posenet_speed.py)
-    bf16: bool = True  # bf16 autocast for the U-Net on CPU (faster here); lifting stays float32
+    channels_last: bool = True  # faster on every CPU measured, AVX2 and AVX512 (benchmarks/posenet_speed.py)
+    # U-Net precision: "auto" = bf16 autocast where the device computes bf16 natively, fp32 elsewhere
+    # (posenet.execution); lifting stays float32. Loading a checkpoint replaces it with the loader's request, so
+    # the machine that trained a checkpoint never decides how another machine runs it.
+    precision: str = "auto"
     flip_test: bool = False  # inference: also run the mirrored inputs and average (2x the U-Net work)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ModelConfig:
+        """A config saved by any version: the old ``bf16`` flag (the trainer's machine's choice) is dropped."""
+        d = {k: v for k, v in d.items() if k != "bf16"}
+        return cls(**d)
 
     def __post_init__(self) -> None:
         if isinstance(self.inputs, dict):
             self.inputs = InputConfig(**self.inputs)
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, got {self.precision!r}")
         if self.aggregation not in ("3d", "2d"):
             raise ValueError(f"aggregation must be '3d' or '2d', got {self.aggregation!r}")
         stride = 2**self.depth
@@ -72,11 +85,25 @@ class PoseNet(nn.Module):
         self.unet = UNet(config.unet)
         if config.channels_last:
             self.unet = self.unet.to(memory_format=torch.channels_last)
+        # An inference runtime's copy of the U-Net (posenet.runtime.OnnxRunner), used instead of it when no
+        # gradient is needed; set by posenet.infer.PoseEstimator.
+        self.runner = None
+
+    def precision(self, device: torch.device | str | None = None) -> Precision:
+        """The precision the U-Net runs at on ``device`` (default: where the weights are), and why."""
+        device = torch.device(device) if device is not None else next(self.parameters()).device
+        return _resolved(self.config.precision, str(device))
 
     def _autocast(self, device: torch.device):
-        if self.config.bf16:
+        if self.precision(device).bf16:
             return torch.autocast(device.type, dtype=torch.bfloat16)
         return contextlib.nullcontext()
+
+    def _unet(self, x: Tensor) -> Tensor:
+        if self.runner is not None and not torch.is_grad_enabled():
+            return self.runner(x=x)[0].to(x.device)
+        with self._autocast(x.device):
+            return self.unet(x)
 
     def heatmaps(self, scenes: list[SceneInput]) -> list[Tensor]:
         """U-Net logits ``(P*V, J, h, w)`` per scene, zeros for (person, view) pairs without a box.
@@ -89,8 +116,7 @@ class PoseNet(nn.Module):
         if self.config.channels_last:
             x = x.contiguous(memory_format=torch.channels_last)
         J = self.config.unet.out_channels
-        with self._autocast(device):
-            out = self.unet(x) if x.shape[0] else x.new_zeros(0, J, *x.shape[-2:])
+        out = self._unet(x) if x.shape[0] else x.new_zeros(0, J, *x.shape[-2:])
         out = out.float().contiguous()
         heats, start = [], 0
         for s, r in zip(scenes, runs, strict=True):
@@ -124,6 +150,11 @@ class PoseNet(nn.Module):
         points = lifting.lift(scene.cameras, uv, depth)  # (P or 1, V, M, 3)
         est = lifting.aggregate(logits, points, valid, self.config.eps)
         return PoseOutput(est.joints, est.confidence, est.has_points, logits)
+
+
+@functools.cache
+def _resolved(requested: str, device: str) -> Precision:
+    return resolve_precision(requested, device)
 
 
 def average_flips(plain: PoseOutput, mirrored: PoseOutput) -> PoseOutput:

@@ -38,6 +38,7 @@ from tqdm import tqdm
 
 from posenet.augment import AugmentConfig
 from posenet.checkpoint import save_checkpoint
+from posenet.execution import PRECISIONS
 from posenet.inputs import InputConfig, build_scene, persons_of_sample
 from posenet.loss import mpjpe, reprojection_2d
 from posenet.model import ModelConfig, PoseNet
@@ -75,7 +76,7 @@ class TrainConfig:
     def from_dict(d: dict) -> TrainConfig:
         d = dict(d)
         d["model"] = (
-            ModelConfig(**d["model"]) if isinstance(d.get("model"), dict) else d.get("model", ModelConfig())
+            ModelConfig.from_dict(d["model"]) if isinstance(d.get("model"), dict) else d.get("model", ModelConfig())
         )
         d["augment"] = (
             AugmentConfig(**d["augment"]) if isinstance(d.get("augment"), dict) else d.get("augment")
@@ -101,9 +102,11 @@ def resolve_config(args: argparse.Namespace) -> TrainConfig:
         if getattr(args, key) is not None:
             inputs[key] = getattr(args, key)
     model = preset.pop("model")
-    for key in ("base", "depth", "bf16", "channels_last"):
+    for key in ("base", "depth", "precision", "channels_last"):
         if getattr(args, key) is not None:
             model[key] = getattr(args, key)
+    if args.precision is None and os.environ.get("ORPOSE_PRECISION"):
+        model["precision"] = os.environ["ORPOSE_PRECISION"]
     if args.loss is not None:
         model["aggregation"] = args.loss
     augment = preset.pop("augment")
@@ -261,6 +264,10 @@ def train(cfg: TrainConfig) -> dict:
     )
 
     model = PoseNet(cfg.model).to(device)
+    precision = model.precision()
+    cfg.data_description["precision"] = f"{precision.name} ({precision.reason})"
+    if rank == 0:
+        print(f"precision: {precision.name}: {precision.reason}", file=sys.stderr)
     optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     total_steps = cfg.epochs * len(loader)
     scheduler = torch.optim.lr_scheduler.LambdaLR(
@@ -385,7 +392,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--preset",
         default="cpu",
         choices=sorted(PRESETS),
-        help="cpu (default): 96x96 person crops, U-Net base 16, bf16, 4 scenes per step, cosine decay; "
+        help="cpu (default): 96x96 person crops, U-Net base 16, precision auto, 4 scenes per step, cosine decay; "
         "paper: full 320x240 images, 288x208 random crops, batch 1 scene, 200 epochs "
         "(posenet/configs/NAME.json)",
     )
@@ -399,7 +406,14 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--loss", choices=("3d", "2d"), help="3d: MPJPE through the cameras (paper); 2d: the baseline"
     )
-    g.add_argument("--bf16", action=argparse.BooleanOptionalAction, help="bf16 autocast for the U-Net")
+    g.add_argument(
+        "--precision",
+        choices=PRECISIONS,
+        help="U-Net precision: auto (default; bf16 only where this machine computes it natively, else fp32), "
+        "fp32 or bf16; also $ORPOSE_PRECISION",
+    )
+    g.add_argument("--bf16", dest="precision", action="store_const", const="bf16", help="= --precision bf16")
+    g.add_argument("--no-bf16", dest="precision", action="store_const", const="fp32", help="= --precision fp32")
     g.add_argument(
         "--channels-last", action=argparse.BooleanOptionalAction, help="channels_last memory format"
     )

@@ -37,6 +37,9 @@ async def lifespan(app: FastAPI):
                 settings.device,
                 settings.load_detector,
                 PipelineConfig(max_pose_pixels=settings.max_pose_pixels),
+                settings.precision,
+                settings.backend,
+                settings.threads,
             )
         )
     yield

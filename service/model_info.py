@@ -6,9 +6,10 @@ the answer describes the weights actually loaded rather than what a deployment c
 
 from __future__ import annotations
 
+from posenet.execution import machine
 from posenet.skeleton import JOINTS
 from service.pipeline import ScenePipeline
-from service.schemas import ModelInfo
+from service.schemas import ModelInfo, Runtime
 
 # Config keys that say what a model saw in training, in the order they are reported.
 _DATA_KEYS = (
@@ -43,4 +44,16 @@ def model_info(pipeline: ScenePipeline, device: str) -> ModelInfo:
         detector_trained_on=None if pipeline.detector is None else summarise_training(pipeline.detector_meta),
         detector_loaded=pipeline.detector is not None,
         device=device,
+        runtime=[
+            Runtime(
+                network=name,
+                backend=net.backend.name,
+                backend_reason=net.backend.reason,
+                precision=net.precision.name,
+                precision_reason=net.precision.reason,
+            )
+            for name, net in (("pose", pipeline.pose), ("detector", pipeline.detector))
+            if net is not None
+        ],
+        machine=machine(),
     )

@@ -129,15 +129,21 @@ class ScenePipeline:
         device: str = "cpu",
         load_detector: bool | None = True,
         config: PipelineConfig | None = None,
+        precision: str = "auto",
+        backend: str = "torch",
+        threads: int | None = None,
     ) -> ScenePipeline:
         """Load both models; ``None`` paths mean the weights shipped with the package.
+
+        ``precision`` and ``backend`` say how this machine runs both networks (``posenet.execution``,
+        ``posenet.runtime``); ``threads`` is the runtimes' intra-op thread count.
 
         ``load_detector=None`` loads the detector only when ``detector_checkpoint`` is given or shipped detector
         weights exist, and otherwise serves reference-box mode only (with a warning in the log).
         """
         from posenet.infer import PoseEstimator
 
-        pose = PoseEstimator.from_checkpoint(pose_checkpoint, device=device)
+        pose = PoseEstimator.from_checkpoint(pose_checkpoint, device, precision, backend, threads)
         if load_detector is None:
             from detector.infer import DEFAULT_WEIGHTS
 
@@ -154,7 +160,7 @@ class ScenePipeline:
         from detector.checkpoint import read_config
         from detector.infer import DEFAULT_WEIGHTS, PersonDetector
 
-        detector = PersonDetector.from_checkpoint(detector_checkpoint, device=device)
+        detector = PersonDetector.from_checkpoint(detector_checkpoint, device, precision, backend, threads)
         return cls(pose, detector, config, read_config(detector_checkpoint or DEFAULT_WEIGHTS))
 
     # ----------------------------------------------------------------------------------------- stages

@@ -190,6 +190,18 @@ class SceneOut(BaseModel):
     timings: Timings = Field(..., description="server milliseconds per stage of this request")
 
 
+class Runtime(BaseModel):
+    network: Literal["pose", "detector"] = Field(..., description="which network")
+    backend: str = Field(..., description="torch, onnxruntime or openvino")
+    backend_reason: str = Field(
+        ..., description="why that backend (ORPOSE_BACKEND, what is installed, a failure)"
+    )
+    precision: str = Field(..., description="fp32 or bf16")
+    precision_reason: str = Field(
+        ..., description="why that precision (ORPOSE_PRECISION, the CPU's bf16 support)"
+    )
+
+
 class ModelInfo(BaseModel):
     joints: list[str] = Field(..., description="the joints every person has, in order")
     modalities: list[str] = Field(
@@ -202,6 +214,12 @@ class ModelInfo(BaseModel):
     detector_trained_on: str | None = Field(None, description="what the detector's weights were trained on")
     detector_loaded: bool = Field(..., description="whether detector mode is available")
     device: str = Field(..., description="the torch device the models run on")
+    runtime: list[Runtime] = Field(
+        default_factory=list, description="how each network runs on this machine: backend, precision and why"
+    )
+    machine: dict = Field(
+        default_factory=dict, description="the machine the service runs on: CPU, cores, capability, versions"
+    )
 
 
 class Health(BaseModel):

@@ -7,6 +7,7 @@ time: :func:`service.app.create_app` builds a :class:`Settings` when it is calle
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -23,6 +24,18 @@ class Settings(BaseSettings):
     )
     detector_checkpoint: Path | None = Field(None, description="DETR checkpoint; unset = the shipped weights")
     device: str = Field("cpu", description="torch device for both models, e.g. 'cpu' or 'cuda:0'")
+    # Chosen for the machine that serves, never by the one that trained (posenet.execution): bf16 only where it is
+    # native (AVX512-BF16, AMX, a GPU); on AVX2-only CPUs bf16 is emulated and 7-20x slower than fp32.
+    precision: Literal["auto", "fp32", "bf16"] = Field(
+        "auto",
+        description="model precision: auto (bf16 only where the device computes it natively), fp32, bf16",
+    )
+    # posenet.runtime: the ONNX graphs are exported from the loaded weights at start-up and cached in
+    # $ORPOSE_CACHE_DIR (default ~/.cache/or-pose); `python -m service.export` builds them ahead of time.
+    backend: Literal["auto", "torch", "onnxruntime", "openvino"] = Field(
+        "auto",
+        description="inference runtime of both networks: auto (openvino, else onnxruntime, else torch)",
+    )
     threads: int = Field(2, ge=1, le=256, description="torch intra-op threads (torch.set_num_threads)")
     # One inference at a time by default: torch already uses `threads` cores inside one forward pass, and two
     # concurrent passes on the same cores only add latency to both.

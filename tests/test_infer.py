@@ -24,10 +24,10 @@ def scene(tmp_path_factory):
     return views, boxes
 
 
-def _estimator(mode: str, bf16: bool = False, seed: int = 0) -> PoseEstimator:
+def _estimator(mode: str, precision: str = "fp32", seed: int = 0) -> PoseEstimator:
     torch.manual_seed(seed)
     inputs = InputConfig(mode=mode, crop_size=32, image_size=(80, 60), train_crop=(64, 48))
-    model = PoseNet(ModelConfig(inputs=inputs, base=8, depth=2, bf16=bf16))
+    model = PoseNet(ModelConfig(inputs=inputs, base=8, depth=2, precision=precision))
     with torch.no_grad():  # non-trivial BatchNorm statistics, so eval mode differs from train mode
         for m in model.modules():
             if isinstance(m, torch.nn.BatchNorm2d):
@@ -84,11 +84,13 @@ def test_bad_boxes_raise(scene):
 
 def test_checkpoint_round_trip(scene, tmp_path):
     views, boxes = scene
-    est = _estimator("crop", bf16=True, seed=3)
+    est = _estimator("crop", precision="bf16", seed=3)
     cfg = {"model": dataclasses.asdict(est.model.config), "preset": "test", "subsample": 1}
     save_checkpoint(tmp_path / "best", est.model, cfg)
-    again = PoseEstimator.from_checkpoint(tmp_path / "best")
+    again = PoseEstimator.from_checkpoint(tmp_path / "best", precision="bf16")
     torch.testing.assert_close(again.predict(views, boxes).joints, est.predict(views, boxes).joints)
+    # The loader decides the precision, never the checkpoint (saved here by a bf16 model).
+    assert PoseEstimator.from_checkpoint(tmp_path / "best", precision="fp32").precision.name == "fp32"
     model, config = load_checkpoint(tmp_path)  # a run folder: its best/
     assert config["preset"] == "test" and model.config.inputs.crop_size == 32
 

@@ -23,7 +23,7 @@ from service.pipeline import FrameView, ScenePipeline, group_by_ids
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
     torch.manual_seed(0)
-    cfg = ModelConfig(bf16=False)  # float32 so that batched and single runs agree to rounding
+    cfg = ModelConfig(precision="fp32")  # float32 so that batched and single runs agree to rounding
     pose = PoseEstimator(PoseNet(cfg), {"model": dataclasses.asdict(cfg)})
     data = write_tiny_mvor(tmp_path_factory.mktemp("tiny"), days=(1,), frames_per_day=2)
     return ScenePipeline(pose), data, MvorDataset(data.root, data.gt)

@@ -34,7 +34,7 @@ def test_one_training_step_lowers_the_loss(tiny, mode, aggregation):
     root, ann = tiny
     sample = MvorDataset(root, ann, days=[1])[0]
     inputs = InputConfig(mode=mode, crop_size=32, image_size=(80, 60), train_crop=(64, 48))
-    cfg = ModelConfig(inputs=inputs, base=8, depth=2, aggregation=aggregation, bf16=False)
+    cfg = ModelConfig(inputs=inputs, base=8, depth=2, aggregation=aggregation, precision="fp32")
     model = PoseNet(cfg)
     persons = persons_of_sample(sample)
     g = torch.Generator().manual_seed(0)

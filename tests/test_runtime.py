@@ -1,0 +1,162 @@
+"""Precision chosen by the machine, and the inference runtimes against torch.
+
+The parity test runs the shipped weights of both stages on the example frame (examples/frame) through the
+whole pipeline, once on torch (fp32) and once on each installed runtime: joints within 1 mm, boxes within
+0.5 px, scores within 1e-3 (issue 11's bounds).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import posenet.execution as execution
+from posenet.execution import machine, machine_line, resolve_precision
+from posenet.runtime import BACKENDS, export_onnx, installed, resolve_backend
+
+REPO = Path(__file__).resolve().parents[1]
+FRAME = REPO / "examples" / "frame"
+RUNTIMES = [b for b in ("onnxruntime", "openvino") if installed(b)]
+
+
+def test_precision_is_chosen_by_the_machine(monkeypatch):
+    assert resolve_precision("fp32").name == "fp32" and resolve_precision("bf16").bf16
+    with pytest.raises(ValueError, match="precision must be one of"):
+        resolve_precision("fp16")
+    # An AVX2-only CPU (AMD Zen 2/3): emulated bf16 is 7-20x slower, so auto is fp32, and says why.
+    monkeypatch.setattr(execution, "cpu_flags", lambda: frozenset({"avx2", "fma"}))
+    p = resolve_precision("auto")
+    assert p.name == "fp32" and "no native bf16" in p.reason
+    # Native bf16 flags but torch capped to AVX2 (ATEN_CPU_CAPABILITY): still fp32.
+    monkeypatch.setattr(execution, "cpu_flags", lambda: frozenset({"avx512f", "avx512_bf16"}))
+    monkeypatch.setattr(execution, "cpu_capability", lambda: "AVX2")
+    assert resolve_precision("auto").name == "fp32"
+    monkeypatch.setattr(execution, "cpu_capability", lambda: "AVX512")
+    if torch.backends.mkldnn.is_available() and torch.ops.mkldnn._is_mkldnn_bf16_supported():
+        p = resolve_precision("auto")
+        assert p.name == "bf16" and "natively" in p.reason
+
+
+def test_machine_is_described():
+    m = machine()
+    assert m["cores"] >= 1 and m["torch_capability"] and m["torch"] == torch.__version__
+    assert m["cpu"] in machine_line(m) and "capability" in machine_line(m)
+
+
+def test_backend_choice():
+    assert resolve_backend("torch").name == "torch"
+    assert resolve_backend("auto", "cuda").name == "torch"  # the runtimes here are CPU-only
+    assert resolve_backend("auto").name == (RUNTIMES[-1] if RUNTIMES else "torch")
+    with pytest.raises(ValueError, match="backend must be one of"):
+        resolve_backend("tensorrt")
+    assert set(BACKENDS) == {"auto", "torch", "onnxruntime", "openvino"}
+
+
+def test_export_is_cached_by_weights_and_leaves_the_module_as_it_was(tmp_path):
+    net = torch.nn.Sequential(torch.nn.Conv2d(3, 4, 3), torch.nn.BatchNorm2d(4)).eval()
+    wrapper = torch.nn.Sequential(net)  # a fresh wrapper is in training mode, the network is not
+    x = torch.randn(2, 3, 8, 8)
+    axes = {"x": {0: "n"}, "y": {0: "n"}}
+    a = export_onnx(wrapper, [x], ["x"], ["y"], axes, "t", {}, tmp_path)
+    assert not net[1].training  # the exporter must not switch the wrapped batch norm to training
+    assert export_onnx(wrapper, [x], ["x"], ["y"], axes, "t", {}, tmp_path) == a  # cached
+    with torch.no_grad():
+        net[0].weight.add_(1.0)
+    assert export_onnx(wrapper, [x], ["x"], ["y"], axes, "t", {}, tmp_path) != a  # new weights, new graph
+
+
+@pytest.fixture(scope="module")
+def example_frame():
+    from service.validation import Limits, parse_scene, validate_scene
+
+    files = {}
+    for i in range(3):
+        files[f"color_{i}"] = (FRAME / f"color_{i}.jpg").read_bytes()
+        files[f"depth_{i}"] = (FRAME / f"depth_{i}.png").read_bytes()
+    detect = validate_scene(parse_scene((FRAME / "scene.json").read_text(), Limits()), files, Limits(), True)
+    boxed = validate_scene(
+        parse_scene((FRAME / "scene_boxes.json").read_text(), Limits()), files, Limits(), True
+    )
+    return detect, boxed
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("onnx")
+    mp = pytest.MonkeyPatch()
+    mp.setenv("ORPOSE_CACHE_DIR", str(folder))
+    yield folder
+    mp.undo()
+
+
+@pytest.mark.skipif(not RUNTIMES, reason="neither onnxruntime nor openvino is installed")
+@pytest.mark.parametrize("backend", RUNTIMES)
+def test_runtime_matches_torch_on_the_example_frame(backend, example_frame, cache):
+    from service.pipeline import ScenePipeline
+
+    detect, boxed = example_frame
+    ref = ScenePipeline.from_checkpoints(precision="fp32", backend="torch")
+    run = ScenePipeline.from_checkpoints(precision="fp32", backend=backend, threads=2)
+    assert run.pose.backend.name == backend and run.detector.backend.name == backend
+    # Detector mode: the same persons, boxes and scores.
+    a, b = ref.run(detect.views), run.run(detect.views)
+    assert len(a.persons) == len(b.persons) > 0
+    for p, q in zip(a.persons, b.persons, strict=True):
+        assert p.support == q.support
+        for box_p, box_q, s_p, s_q in zip(p.boxes, q.boxes, p.scores, q.scores, strict=True):
+            if box_p is not None:
+                np.testing.assert_allclose(box_q, box_p, atol=0.5)  # pixels
+                assert abs(s_q - s_p) <= 1e-3
+    # Pose: the same joints from the same boxes (the frame's reference boxes, and torch's detections). Joints
+    # from the two detectors' own boxes may differ by more: a box moved by 1e-4 px can move a crop pixel onto
+    # another depth pixel at a depth edge (nearest sampling), which once moved a joint by 1.2 mm.
+    detected = [
+        [
+            np.array([p.boxes[v] for p in a.persons if p.boxes[v] is not None]).reshape(-1, 4)
+            for v in range(3)
+        ],
+        [
+            np.array([k for k, p in enumerate(a.persons) if p.boxes[v] is not None], np.int64)
+            for v in range(3)
+        ],
+    ]
+    for views, boxes, ids in ((boxed.views, boxed.boxes, boxed.person_ids), (detect.views, *detected)):
+        a, b = ref.run(views, boxes, ids), run.run(views, boxes, ids)
+        assert len(a.persons) == len(b.persons) > 0
+        for p, q in zip(a.persons, b.persons, strict=True):
+            np.testing.assert_allclose(q.joints, p.joints, atol=1.0)  # mm
+
+
+def test_a_failing_runtime_falls_back_to_torch(monkeypatch, tmp_path):
+    import posenet.infer
+    from posenet.infer import PoseEstimator
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no such runtime here")
+
+    monkeypatch.setattr(posenet.infer, "OnnxRunner", broken)
+    monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
+    est = PoseEstimator.from_checkpoint(None, precision="fp32", backend=RUNTIMES[0] if RUNTIMES else "torch")
+    assert est.backend.name == "torch"
+    if RUNTIMES:
+        assert "no such runtime here" in est.backend.reason
+
+
+def test_model_route_says_how_each_network_runs_and_on_what(tmp_path):
+    import httpx
+    from service_harness import Server, tiny_checkpoints
+
+    pose, det = tiny_checkpoints(tmp_path / "ckpt")
+    backend = RUNTIMES[0] if RUNTIMES else "torch"
+    env = {"ORPOSE_POSE_CHECKPOINT": str(pose), "ORPOSE_DETECTOR_CHECKPOINT": str(det),
+           "ORPOSE_PRECISION": "fp32", "ORPOSE_BACKEND": backend, "ORPOSE_CACHE_DIR": str(tmp_path / "onnx")}  # fmt: skip
+    with Server(env) as url:
+        info = httpx.get(f"{url}/model", timeout=30).json()
+    runtime = {r["network"]: r for r in info["runtime"]}
+    assert set(runtime) == {"pose", "detector"}
+    for r in runtime.values():
+        assert r["backend"] == backend and r["precision"] == "fp32" and r["precision_reason"]
+    assert info["machine"]["torch_capability"] and info["machine"]["cores"] >= 1
