@@ -83,7 +83,14 @@ def test_recording_errors(recording):
 def test_client_posts_a_recording_as_the_service_expects(recording, monkeypatch):
     ds = RecordingDataset(recording, modalities=())
     scene, files = client.scene_request(ds[0], recording, reference_boxes=False)
-    SceneIn.model_validate(scene)  # the request's scene part passes the service's schema
+    from service.validation import Limits, validate_scene
+
+    # The request passes the service's schema and its validation of cameras against the decoded images.
+    checked = validate_scene(
+        SceneIn.model_validate(scene), {k: v[1] for k, v in files}, Limits(), need_color=True
+    )
+    assert [v.depth.shape for v in checked.views] == [(H, W)] * 3 and checked.boxes is None
+    torch.testing.assert_close(checked.views[2].camera.extrinsics, ds[0].views[2].camera.extrinsics)
     assert [name for name, _ in files] == ["color_0", "depth_0", "color_1", "depth_1", "color_2", "depth_2"]
     assert files[5][1][1] == (recording / "cam10/depth/000000.png").read_bytes()
     seen = {}
