@@ -11,15 +11,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import torch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-
-from posenet.rig.geometry import look_at_point  # noqa: E402
-from posenet.rig.rigfile import Rig  # noqa: E402
+from posenet.rig.geometry import look_at_point
+from posenet.rig.rigfile import Rig
 
 
 def up_vector(rig: Rig, up: torch.Tensor | None = None) -> tuple[Rig, torch.Tensor, str]:
@@ -55,6 +51,11 @@ def draw_rig(rig: Rig, path: str | Path, up: torch.Tensor | None = None, max_ran
     ``floor_mm``: the floor's height along ``up`` when known (``check.find_floor`` on depth frames), drawn in the
     side view.
     """
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only; imported here so that importing this module changes nothing
+    import matplotlib.pyplot as plt
+
     rig, up, source = up_vector(rig, up)
     up_source = up_source or source
     up = up.to(torch.float64)
