@@ -348,3 +348,18 @@ def test_reads_yaml_as_easymocap_writes_it(tmp_path):
         rig.cameras[1].position.numpy(), -R.T @ np.array([1.5, 0.0, 0.2]) * 1000, atol=1e-9
     )
     np.testing.assert_allclose(rig.cameras[1].distortion.numpy(), [0.01, -0.02, 0, 0, 0])
+
+
+def test_depth_agreement_tells_the_direction_where_geometry_cannot(mvor_file):
+    # The inverse of a camera-referenced rig is itself a valid-looking rig (the direction check only reports);
+    # depth frames decide: nearly every point agrees with the right direction, few with the inverse.
+    room = formats.read_mvor(mvor_file).to_room_frame()
+    small = Rig([c.scale(0.25) for c in room.cameras], room.names)
+    depths = _render_room(small)
+    first = small.to_first_camera()
+    inverted = Rig(
+        [Camera(c.intrinsics, rigid_inverse(c.extrinsics), None, c.size) for c in first.cameras], first.names
+    )
+    assert "WARNING" not in check_direction(inverted.cameras, "inverted", "T(v->0)")
+    assert min(camera_agreement(depth_agreement(first, depths, stride=2), 3)) > 0.95
+    assert max(camera_agreement(depth_agreement(inverted, depths, stride=2), 3)) < 0.3
