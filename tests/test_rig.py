@@ -318,6 +318,16 @@ def test_check_cli_with_depth_frames(mvor_file, tmp_path, capsys):
         level for level, _ in depth_checks([np.full((4, 4), 250, np.uint16), np.zeros((4, 4), np.uint16)])
     ]
     assert levels == ["WARN", "FAIL"]  # 2.5 m in cm units reads as 250 mm; an all-unknown frame
+    inverse = Rig(
+        [
+            Camera(c.intrinsics, rigid_inverse(c.extrinsics), None, c.size)
+            for c in small.to_first_camera().cameras
+        ],
+        small.names,
+    )
+    write_rig_json(inverse, tmp_path / "inverse.json")
+    assert main(["check", str(tmp_path / "inverse.json"), *argv[2:]] + [str(f) for f in frames]) == 1
+    assert "the rig file probably holds the inverse transforms" in capsys.readouterr().out
     assert main(argv + [str(frames[0])]) == 2  # one frame for three cameras is refused
     assert "1 depth frames for 3 cameras" in capsys.readouterr().err
 

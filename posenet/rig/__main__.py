@@ -16,9 +16,11 @@ and transform directions against where the cameras look, and a contradiction sto
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
+from posenet.cameras import rigid_inverse
 from posenet.rig import formats
 from posenet.rig.rigfile import Rig, read_rig_json, write_rig_json
 
@@ -159,6 +161,16 @@ def check(args: argparse.Namespace) -> int:
             "  per camera, mean within over its pairs: "
             + ", ".join(f"{v}: {100 * a:.1f} %" for v, a in enumerate(per_camera))
         )
+        mean = sum(r["within"] for r in pairs) / len(pairs)
+        if mean < 0.6:  # most points disagree: would the transforms read the other way round fit?
+            inverse = [dataclasses.replace(c, extrinsics=rigid_inverse(c.extrinsics)) for c in rig.cameras]
+            flipped = depth_agreement(Rig(inverse, rig.names), depths, stride=args.stride)
+            other = sum(r["within"] for r in flipped) / len(flipped)
+            level = "WARN" if other > mean + 0.2 else "INFO"
+            print(f"{level} only {100 * mean:.0f} % of the overlapping points agree; with the extrinsics inverted "
+                  f"(T(ref->v) read as T(v->ref)) {100 * other:.0f} % would"
+                  + (": the rig file probably holds the inverse transforms" if level == "WARN" else ""))  # fmt: skip
+            failed = True
     return 1 if failed else 0
 
 
