@@ -144,10 +144,11 @@ def check(args: argparse.Namespace) -> int:
             print(
                 f"OK   floor: {100 * share:.0f} % of the depth points lie within 40 mm of a plane; cameras {heights} m above it"
             )
-    picture = args.picture or args.rig.with_suffix(".png")
-    drawn = draw_rig(rig, picture, up=up, title=args.title, floor_mm=floor, up_source=up_source)
-    cover = ", ".join(f">={k} views {a:.1f} m2" for k, a in drawn["coverage"].items())
-    print(f"picture: {picture} (up: {drawn['up_source']}; working plane coverage {cover})")
+    if not args.no_picture:
+        picture = args.picture or args.rig.with_suffix(".png")
+        drawn = draw_rig(rig, picture, up=up, title=args.title, floor_mm=floor, up_source=up_source)
+        cover = ", ".join(f">={k} views {a:.1f} m2" for k, a in drawn["coverage"].items())
+        print(f"picture: {picture} (up: {drawn['up_source']}; working plane coverage {cover})")
     failed = any(level == "FAIL" for level, _ in results)
     if depths:
         print(f"depth agreement (view i's points in view j; |diff| < {AGREE_MM:.0f} mm counts as agreeing):")
@@ -200,6 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--depth-frames", type=Path, nargs="+", help="one uint16 mm depth PNG per camera, same instant"
     )
     k.add_argument("--picture", type=Path, help="where to write the PNG (default: beside the rig, .png)")
+    k.add_argument("--no-picture", action="store_true", help="checks only, no picture")
     k.add_argument(
         "--up", type=float, nargs=3, help="the floor's normal in the rig's frame (default: estimated)"
     )
