@@ -10,6 +10,14 @@ configurations: a frame with 1 person and one with 3 persons, each with referenc
 with the detector on. For each it reports the client-side latency p50/p95 over ``--requests`` sequential
 requests and the server's per-stage breakdown (decode, detect, match, pose, encode), then the throughput at
 concurrency 1 and 4 (detector on, 3-person frame), and the server's peak RSS. ``--out`` also writes JSON.
+
+``--variants`` compares ways of running the same weights side by side in one run, one server each:
+``torch-bf16`` (torch with bf16 forced: what the shipped configs did before precision became ``auto``),
+``torch`` (precision ``auto``), ``onnxruntime`` and ``openvino``. Each variant's machine line comes from the
+server's ``/model``. To see an AVX2-only CPU on a newer one, cap torch's instruction sets (the runtimes are
+not capped by these)::
+
+    ATEN_CPU_CAPABILITY=avx2 ONEDNN_MAX_CPU_ISA=AVX2 python benchmarks/service_latency.py --variants torch-bf16 torch
 """
 
 from __future__ import annotations
@@ -39,6 +47,12 @@ from service.client import scene_request  # noqa: E402
 
 MVOR_JSON = REPO.parent / "shared" / "mvor" / "camma_mvor_2018.json"
 STAGES = ("decode", "detect", "match", "pose", "encode", "total")
+VARIANTS = {  # name: the server's environment
+    "torch-bf16": {"ORPOSE_BACKEND": "torch", "ORPOSE_PRECISION": "bf16"},
+    "torch": {"ORPOSE_BACKEND": "torch", "ORPOSE_PRECISION": "auto"},
+    "onnxruntime": {"ORPOSE_BACKEND": "onnxruntime", "ORPOSE_PRECISION": "auto"},
+    "openvino": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "auto"},
+}
 
 
 def render_twin(folder: Path, annotations: Path, frames: int) -> Path:
@@ -145,56 +159,61 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--requests", type=int, default=20, help="timed requests per configuration")
     parser.add_argument("--threads", type=int, default=2, help="ORPOSE_THREADS of the server")
     parser.add_argument("--device", default="cpu", help="ORPOSE_DEVICE of the server")
+    parser.add_argument(
+        "--variants", nargs="+", choices=sorted(VARIANTS), default=list(VARIANTS),
+        help="ways of running the models, one server each (default: all)",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, help="also write the results as JSON here")
     args = parser.parse_args(argv)
 
+    results = {"threads": args.threads, "variants": {}}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         root = args.data or render_twin(tmp / "twin", args.mvor, 12)
         ds = MvorDataset(None, args.annotations or root / "annotations.json")
-        env = {
-            "ORPOSE_THREADS": str(args.threads),
-            "ORPOSE_DEVICE": args.device,
-            "ORPOSE_MAX_IN_FLIGHT": "16",
-        }
         pose, det = (
             tiny_checkpoints(tmp / "ckpt") if args.tiny else (args.pose_checkpoint, args.detector_checkpoint)
         )
-        env.update(
-            {
-                k: str(v)
-                for k, v in (("ORPOSE_POSE_CHECKPOINT", pose), ("ORPOSE_DETECTOR_CHECKPOINT", det))
-                if v
-            }
-        )
         frames = pick_frames(ds, root)
-        server = Server(env)
-        with server as url, httpx.Client(base_url=url, timeout=300) as client:
-            model = client.get("/model").json()
-            results = {"model": model, "threads": args.threads, "configs": {}}
-            for persons, index in frames.items():
-                sample = ds[index]
-                for mode in ("reference_boxes", "detector"):
-                    scene, files = (reference_request(sample, root, persons) if mode == "reference_boxes"
-                                    else scene_request(sample, root, reference_boxes=False))  # fmt: skip
-                    key = f"{persons}p_{mode}"
-                    results["configs"][key] = {
-                        "frame": sample.id,
-                        **measure(client, scene, files, args.requests),
-                    }
-            scene, files = scene_request(ds[frames[3]], root, reference_boxes=False)
-            results["throughput_fps"] = {
-                str(c): throughput(url, scene, files, c, max(8, args.requests)) for c in (1, 4)
-            }
-            results["peak_rss_mb"] = peak_rss_mb(server.proc.pid)
-    print(format_results(results))
+        for variant in args.variants:
+            env = {"ORPOSE_THREADS": str(args.threads), "ORPOSE_DEVICE": args.device, "ORPOSE_MAX_IN_FLIGHT": "16",
+                   **VARIANTS[variant]}  # fmt: skip
+            env.update({k: str(v) for k, v in (("ORPOSE_POSE_CHECKPOINT", pose),
+                                                ("ORPOSE_DETECTOR_CHECKPOINT", det)) if v})  # fmt: skip
+            results["variants"][variant] = run_variant(env, ds, root, frames, args.requests)
+            print(format_variant(variant, results["variants"][variant]), flush=True)
     if args.out:
         args.out.write_text(json.dumps(results, indent=2))
     return results
 
 
-def format_results(r: dict) -> str:
-    lines = [f"threads={r['threads']}  pose trained on: {r['model']['pose_trained_on']}", ""]
+def run_variant(env: dict, ds: MvorDataset, root: Path, frames: dict[int, int], requests: int) -> dict:
+    server = Server(env)
+    with server as url, httpx.Client(base_url=url, timeout=300) as client:
+        model = client.get("/model").json()
+        result = {"model": model, "configs": {}}
+        for persons, index in frames.items():
+            sample = ds[index]
+            for mode in ("reference_boxes", "detector"):
+                scene, files = (reference_request(sample, root, persons) if mode == "reference_boxes"
+                                else scene_request(sample, root, reference_boxes=False))  # fmt: skip
+                result["configs"][f"{persons}p_{mode}"] = {
+                    "frame": sample.id,
+                    **measure(client, scene, files, requests),
+                }
+        scene, files = scene_request(ds[frames[3]], root, reference_boxes=False)
+        result["throughput_fps"] = {
+            str(c): throughput(url, scene, files, c, max(8, requests)) for c in (1, 4)
+        }
+        result["peak_rss_mb"] = peak_rss_mb(server.proc.pid)
+    return result
+
+
+def format_variant(name: str, r: dict) -> str:
+    from posenet.execution import machine_line
+
+    runs = ", ".join(f"{x['network']} {x['backend']} {x['precision']}" for x in r["model"]["runtime"])
+    lines = [f"== {name}: {runs}", machine_line(r["model"]["machine"]), ""]
     head = f"{'config':<22}{'persons':>8}{'p50 ms':>9}{'p95 ms':>9}" + "".join(f"{s:>9}" for s in STAGES)
     lines += [head + "   (stages: server-side p50, ms)", "-" * len(head)]
     for key, c in r["configs"].items():
@@ -204,7 +223,7 @@ def format_results(r: dict) -> str:
         )
     tp = r["throughput_fps"]
     lines += ["", f"throughput (detector on, 3-person frame): {tp['1']:.2f} frames/s at concurrency 1, "
-              f"{tp['4']:.2f} at concurrency 4", f"server peak RSS: {r['peak_rss_mb']:.0f} MB"]  # fmt: skip
+              f"{tp['4']:.2f} at concurrency 4; server peak RSS {r['peak_rss_mb']:.0f} MB", ""]  # fmt: skip
     return "\n".join(lines)
 
 

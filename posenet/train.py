@@ -58,10 +58,18 @@ class TrainConfig:
     preset: str = "cpu"
     subsample: int = 2  # image subsampling of the reader: 2 gives the paper's 320x240
     epochs: int = 60
+    # A wall-clock budget of training minutes (validation not counted): when set, training runs until it is
+    # spent whatever ``epochs`` says, and the LR schedule (warm-up, cosine decay) follows the elapsed fraction
+    # of the budget instead of the step count: "the best model in 30 minutes".
+    minutes: float | None = None
+    warmup: float = 0.0  # fraction of training (steps or budget) with a linear LR warm-up from 10 %
     lr: float = 1e-3  # Adam, as the paper
     scenes_per_step: int = 4  # scenes per optimiser step (the paper: 1)
     decay_start: float = 0.75  # cosine decay of the LR to 0 over the last quarter; 1.0 keeps it constant
     val_every: int = 5  # epochs between validations (and always after the last epoch)
+    val_every_minutes: float | None = (
+        None  # with --minutes: validate after the epoch that passes each N minutes
+    )
     threads: int | None = None  # torch CPU threads (default: torch's choice)
     seed: int = 0
     cache: bool = True  # keep decoded frames in memory (num_workers must then be 0)
@@ -76,7 +84,9 @@ class TrainConfig:
     def from_dict(d: dict) -> TrainConfig:
         d = dict(d)
         d["model"] = (
-            ModelConfig.from_dict(d["model"]) if isinstance(d.get("model"), dict) else d.get("model", ModelConfig())
+            ModelConfig.from_dict(d["model"])
+            if isinstance(d.get("model"), dict)
+            else d.get("model", ModelConfig())
         )
         d["augment"] = (
             AugmentConfig(**d["augment"]) if isinstance(d.get("augment"), dict) else d.get("augment")
@@ -169,12 +179,15 @@ def setup_distributed(device: str) -> tuple[int, int]:
     return (dist.get_rank(), dist.get_world_size()) if dist.is_initialized() else (0, 1)
 
 
-def lr_factor(step: int, total: int, decay_start: float) -> float:
-    """1 until ``decay_start`` of the training, then a cosine down to 0 at the end."""
+def lr_factor(step: float, total: float, decay_start: float, warmup: float = 0.0) -> float:
+    """A linear warm-up from 0.1 over the first ``warmup`` of the training, 1 until ``decay_start`` of it, then a
+    cosine down to 0 at the end. ``step`` / ``total`` are steps, or seconds of a time budget."""
+    if warmup > 0 and step < warmup * total:
+        return 0.1 + 0.9 * step / (warmup * total)
     start = decay_start * total
     if step < start or total <= start:
         return 1.0
-    return 0.5 * (1 + math.cos(math.pi * (step - start) / (total - start)))
+    return 0.5 * (1 + math.cos(math.pi * min(1.0, (step - start) / (total - start))))
 
 
 def scene_loss(model_config: ModelConfig, out, persons, cameras) -> torch.Tensor:
@@ -269,10 +282,17 @@ def train(cfg: TrainConfig) -> dict:
     if rank == 0:
         print(f"precision: {precision.name}: {precision.reason}", file=sys.stderr)
     optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    budget_s = None if cfg.minutes is None else 60.0 * cfg.minutes
     total_steps = cfg.epochs * len(loader)
-    scheduler = torch.optim.lr_scheduler.LambdaLR(
-        optimiser, lambda s: lr_factor(s, total_steps, cfg.decay_start)
-    )
+    step, elapsed = 0, 0.0  # optimiser steps and seconds of training (validation excluded) so far
+
+    def set_lr() -> float:
+        done, total = (elapsed, budget_s) if budget_s is not None else (step, total_steps)
+        lr = cfg.lr * lr_factor(done, total, cfg.decay_start, cfg.warmup)
+        for group in optimiser.param_groups:
+            group["lr"] = lr
+        return lr
+
     start_epoch, best = 0, float("inf")
     state_file = out / "last" / "train_state.pt"
     if state_file.is_file():
@@ -281,8 +301,10 @@ def train(cfg: TrainConfig) -> dict:
         state = torch.load(state_file, map_location="cpu", weights_only=False)
         model.load_state_dict(load_file(out / "last" / "model.safetensors"))
         optimiser.load_state_dict(state["optimiser"])
-        scheduler.load_state_dict(state["scheduler"])
         start_epoch, best = state["epoch"], state["best"]
+        # (runs from before the time budget saved a LambdaLR, whose last_epoch is the step count)
+        step = state.get("step", state.get("scheduler", {}).get("last_epoch", 0))
+        elapsed = state.get("elapsed_s", 0.0)
         if rank == 0:
             print(f"resuming {out} at epoch {start_epoch} (best {best:.2f} cm)", file=sys.stderr)
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
@@ -292,17 +314,26 @@ def train(cfg: TrainConfig) -> dict:
         (out / "config.json").write_text(json.dumps(config_dict, indent=2, default=str))
 
     history = []
-    for epoch in range(start_epoch, cfg.epochs):
+    last_val_minute = elapsed / 60.0
+    epochs = cfg.epochs if budget_s is None else 10**9  # with a budget, as many epochs as the time allows
+    for epoch in range(start_epoch, epochs):
+        if budget_s is not None and elapsed >= budget_s:
+            break
         model.train()
         sampler.set_epoch(epoch)
         gen = torch.Generator().manual_seed(cfg.seed * 100003 + epoch * 1009 + rank)
-        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{cfg.epochs}", disable=rank != 0, leave=False)
+        desc = f"epoch {epoch + 1}" + (
+            f"/{cfg.epochs}" if budget_s is None else f", {cfg.minutes:g} min budget"
+        )
+        bar = tqdm(loader, desc=desc, disable=rank != 0, leave=False)
         running, seen, t0 = None, 0, time.time()
         for samples in bar:
             persons = [persons_of_sample(s, "annotated") for s in samples]
             persons = [p for p in persons if p.person_ids.numel()]
             if not persons:
                 continue
+            t_step = time.time()
+            lr = set_lr()
             scenes = [
                 build_scene(p.views, p.boxes, p.has_box, cfg.model.inputs, cfg.augment, gen) for p in persons
             ]
@@ -314,19 +345,32 @@ def train(cfg: TrainConfig) -> dict:
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
-            scheduler.step()
+            step += 1
+            elapsed += time.time() - t_step
             seen += len(persons)
             value = float(loss.detach())
             running = value if running is None else 0.95 * running + 0.05 * value
-            bar.set_postfix(loss=f"{running:.1f}", lr=f"{scheduler.get_last_lr()[0]:.1e}")
+            bar.set_postfix(loss=f"{running:.1f}", lr=f"{lr:.1e}", min=f"{elapsed / 60:.1f}")
+            if budget_s is not None and elapsed >= budget_s:
+                break
         record = {
             "epoch": epoch + 1,
             "train_loss": running,
             "scenes": seen,
             "seconds": round(time.time() - t0, 1),
+            "minutes": round(elapsed / 60.0, 2),
+            "steps": step,
+            "lr": lr if seen else None,
         }
-        last = epoch + 1 == cfg.epochs
-        if rank == 0 and val_set is not None and ((epoch + 1) % cfg.val_every == 0 or last):
+        if budget_s is None:
+            last = epoch + 1 == cfg.epochs
+            due = (epoch + 1) % cfg.val_every == 0
+        else:
+            last = elapsed >= budget_s
+            every = cfg.val_every_minutes or cfg.minutes / 6
+            due = elapsed / 60.0 - last_val_minute >= every
+        if rank == 0 and val_set is not None and (due or last):
+            last_val_minute = elapsed / 60.0
             metrics = validate(model, annotations, val_set, [cfg.holdout_day])
             record.update({k: v for k, v in metrics.items() if k != "result"})
         if rank == 0:
@@ -337,7 +381,8 @@ def train(cfg: TrainConfig) -> dict:
                 "epoch": epoch + 1,
                 "best": best,
                 "optimiser": optimiser.state_dict(),
-                "scheduler": scheduler.state_dict(),
+                "step": step,
+                "elapsed_s": elapsed,
             }
             save_checkpoint(out / "last", model, config_dict, train_state)
             if improved or (val_set is None and last):
@@ -413,18 +458,31 @@ def build_parser() -> argparse.ArgumentParser:
         "fp32 or bf16; also $ORPOSE_PRECISION",
     )
     g.add_argument("--bf16", dest="precision", action="store_const", const="bf16", help="= --precision bf16")
-    g.add_argument("--no-bf16", dest="precision", action="store_const", const="fp32", help="= --precision fp32")
+    g.add_argument(
+        "--no-bf16", dest="precision", action="store_const", const="fp32", help="= --precision fp32"
+    )
     g.add_argument(
         "--channels-last", action=argparse.BooleanOptionalAction, help="channels_last memory format"
     )
     g = p.add_argument_group("optimisation")
     g.add_argument("--epochs", type=int, help="passes over the training frames")
+    g.add_argument(
+        "--minutes",
+        type=float,
+        help="a budget of training minutes instead of --epochs: the LR schedule follows the elapsed time",
+    )
+    g.add_argument("--warmup", type=float, help="fraction of training with a linear LR warm-up (default 0)")
     g.add_argument("--lr", type=float, help="Adam learning rate (paper: 1e-3)")
     g.add_argument("--scenes-per-step", type=int, help="scenes per optimiser step (paper: 1)")
     g.add_argument(
         "--decay-start", type=float, help="fraction of training after which the LR decays to 0 (cosine)"
     )
     g.add_argument("--val-every", type=int, help="epochs between validations on the held-out day")
+    g.add_argument(
+        "--val-every-minutes",
+        type=float,
+        help="with --minutes: minutes between validations (default budget/6)",
+    )
     g.add_argument("--seed", type=int, help="seed of the initialisation, shuffling and augmentation")
     g = p.add_argument_group("augmentation (each switchable)")
     g.add_argument("--flip", action=argparse.BooleanOptionalAction, help="horizontal flip, p = 0.5")
@@ -453,7 +511,15 @@ def main(argv: list[str] | None = None) -> int:
         if not saved.is_file():
             raise FileNotFoundError(f"--resume: {saved} does not exist; start the run without --resume")
         cfg = TrainConfig.from_dict(json.loads(saved.read_text()))
-        for key in ("epochs", "val_every", "threads", "num_workers", "device"):
+        for key in (
+            "epochs",
+            "minutes",
+            "val_every",
+            "val_every_minutes",
+            "threads",
+            "num_workers",
+            "device",
+        ):
             if getattr(args, key, None) is not None:
                 setattr(cfg, key, getattr(args, key))
     else:

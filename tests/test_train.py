@@ -57,6 +57,11 @@ def test_lr_schedule():
     assert lr_factor(0, 100, 0.75) == 1.0 and lr_factor(74, 100, 0.75) == 1.0
     assert 0.4 < lr_factor(87, 100, 0.75) < 0.6 and lr_factor(100, 100, 0.75) == 0.0
     assert lr_factor(99, 100, 1.0) == 1.0
+    # warm-up from 10 % over the first 10 %; the same curve over seconds of a budget as over steps
+    assert lr_factor(0, 100, 0.75, 0.1) == pytest.approx(0.1) and lr_factor(
+        5, 100, 0.75, 0.1
+    ) == pytest.approx(0.55)
+    assert lr_factor(30.0, 60.0, 0.75, 0.1) == 1.0 and lr_factor(75, 60.0, 0.75) == 0.0  # past the budget: 0
 
 
 def _run(args, **kw):
@@ -93,6 +98,20 @@ def test_cli_train_resume_predict(tiny, tmp_path):
     # a fresh run into an existing folder must not silently overwrite it
     with pytest.raises(FileExistsError, match="--resume"):
         train_main([*base, *TINY[:-2]])
+
+
+def test_cli_time_budget_stops_and_resumes(tiny, tmp_path):
+    root, _ = tiny
+    run = tmp_path / "budget"
+    base = ["--data", str(root), "--holdout-day", "2", "--out", str(run)]
+    assert train_main([*base, *TINY[:-2], "--minutes", "0.02", "--warmup", "0.1"]) == 0
+    log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    assert log[-1]["minutes"] >= 0.02 and "val_mpjpe_cm" in log[-1]  # spent, then validated
+    assert all(r["steps"] > 0 for r in log) and log[-1]["lr"] < 1e-3  # the schedule decayed with the clock
+    # resuming with a larger budget continues the clock (and the step count) where it stopped
+    assert train_main([*base, "--resume", "--minutes", "0.04"]) == 0
+    more = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()][len(log) :]
+    assert more and more[0]["steps"] > log[-1]["steps"] and more[-1]["minutes"] >= 0.04
 
 
 def test_torchrun_ddp_gloo_two_processes(tiny, tmp_path):
