@@ -1,20 +1,25 @@
 """Stopping the models' work for a client that has gone.
 
-A thread cannot be killed, and a torch forward pass cannot be interrupted from outside. But every layer of
-both models is an ``nn.Module``, so one global forward pre-hook can check, before each layer, whether the
-request that the current thread works for has been cancelled, and raise :class:`Cancelled` there. The work
-then stops at the next layer (a few ms to a few hundred ms), not at the end of the frame.
+A thread cannot be killed, and a torch op cannot be interrupted from outside. Two things stop the work soon:
 
-The hook reads a thread-local event, set only around a cancellable call: code outside
-:func:`run_cancellable` (training, offline evaluation, other threads) is never affected.
+- every layer of both models is an ``nn.Module``, so one global forward pre-hook checks, before each layer,
+  whether the request that the current thread works for has been cancelled, and raises :class:`Cancelled`;
+- between layers (building the crops, lifting and aggregating), :meth:`CancelToken.cancel` raises
+  :class:`Cancelled` asynchronously in the worker thread (``PyThreadState_SetAsyncExc``), which Python
+  delivers at the thread's next bytecode, that is when the current torch op returns.
+
+So the work stops within one op or layer of the disconnect, not at the end of the frame. Both act only on a
+call run by :meth:`CancelToken.run`: other code and other threads (training, offline evaluation) are never
+affected, and an asynchronous exception not yet delivered when the call ends is withdrawn.
 
 ``await run_until_disconnected(receive, fn, limiter)`` runs ``fn`` on a worker thread while it watches the
-ASGI ``receive`` channel; a ``http.disconnect`` sets the event (and stops any wait for a free worker), and
-the call raises :class:`ClientGone`.
+ASGI ``receive`` channel; a ``http.disconnect`` cancels it (and ends any wait for a free worker), and the
+call raises :class:`ClientGone`.
 """
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import threading
 import time
@@ -59,16 +64,45 @@ def install_hook() -> None:
             _hook = torch.nn.modules.module.register_module_forward_pre_hook(_check)
 
 
-def run_cancellable(fn: Callable[[], T], event: threading.Event) -> T:
-    """``fn()`` in this thread, stopping at its next module call once ``event`` is set."""
-    install_hook()
-    _local.event = event
-    try:
-        if event.is_set():
-            raise Cancelled("the request was cancelled before it started")
-        return fn()
-    finally:
-        _local.event = None
+class CancelToken:
+    """One request's cancellation: :meth:`cancel` (any thread) stops the work running under :meth:`run`."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self._lock = threading.Lock()
+        self._thread: int | None = None  # the worker running the call, while it runs
+
+    def cancel(self) -> None:
+        with self._lock:
+            if self.event.is_set():
+                return
+            self.event.set()
+            if self._thread is not None:
+                _async_raise(self._thread, Cancelled)
+
+    def run(self, fn: Callable[[], T]) -> T:
+        """``fn()`` in this thread, stopped by :class:`Cancelled` once :meth:`cancel` is called."""
+        install_hook()
+        _local.event = self.event
+        with self._lock:
+            if self.event.is_set():
+                raise Cancelled("the request was cancelled before it started")
+            self._thread = threading.get_ident()
+        try:
+            return fn()
+        finally:
+            _local.event = None
+            with self._lock:
+                self._thread = None
+                if self.event.is_set():  # withdraw a Cancelled that has not been delivered yet
+                    _async_raise(threading.get_ident(), None)
+
+
+def _async_raise(thread: int, exc: type[BaseException] | None) -> None:
+    """Raise ``exc`` in ``thread`` at its next bytecode (None: withdraw a pending one)."""
+    ctypes.pythonapi.PyThreadState_SetAsyncExc(
+        ctypes.c_ulong(thread), None if exc is None else ctypes.py_object(exc)
+    )
 
 
 async def run_until_disconnected(
@@ -78,7 +112,7 @@ async def run_until_disconnected(
 
     ``receive`` must be past the request body, so that its next message is ``http.disconnect``.
     """
-    event = threading.Event()
+    token = CancelToken()
     gone_at: list[float] = []
     outcome: dict = {}
     work = anyio.CancelScope()
@@ -88,7 +122,7 @@ async def run_until_disconnected(
             message = await receive()
             if message["type"] == "http.disconnect":
                 gone_at.append(time.perf_counter())
-                event.set()  # the worker thread stops at its next layer
+                token.cancel()  # the worker thread stops at its next op or layer
                 work.cancel()  # and a wait for a free worker ends at once
                 return
 
@@ -96,9 +130,7 @@ async def run_until_disconnected(
         tg.start_soon(watch)
         with work:
             try:
-                outcome["value"] = await anyio.to_thread.run_sync(
-                    lambda: run_cancellable(fn, event), limiter=limiter
-                )
+                outcome["value"] = await anyio.to_thread.run_sync(lambda: token.run(fn), limiter=limiter)
             except Cancelled:
                 pass
             except Exception as exc:  # re-raised below, outside the task group (no ExceptionGroup)
