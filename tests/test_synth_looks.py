@@ -246,3 +246,29 @@ def test_holes_are_zero_and_valid_depths_lie_in_range():
     dark[:, :32] = 1.0
     d = simulate_depth(g, K, dark, np.random.default_rng(0), DepthSensorConfig())
     assert (d[:, 8:32] == 0).all() and (d[:, 90:] > 0).mean() > 0.9
+
+
+def test_multipath_pushes_the_room_back_near_its_edges_only():
+    from posenet.data.synth.primitives import Material, shell
+    from posenet.data.synth.raster import rasterize
+    from posenet.data.synth.rig import look_at
+    from posenet.data.synth.scene import room_edge_distance
+
+    room = [shell([0.0, 0.0, 1500.0], [3000.0, 3000.0, 1500.0], Material((0.5, 0.5, 0.5)))]
+    cam_to_world = look_at(np.array([-1500.0, -1500.0, 1500.0]), np.array([3000.0, 3000.0, 1200.0]))
+    T = np.linalg.inv(cam_to_world)
+    K = Intrinsics(120, 120, 64, 48, 128, 96)
+    g = rasterize([p.to_camera(T) for p in room], K)
+    edges = room_edge_distance(g, K, T, room)
+    assert np.isfinite(edges).all() and edges.min() < 100 and edges.max() > 1000  # a corner and open walls
+    base = DepthSensorConfig(multipath=0.0, noise_k=0.0, white=0.0, wobble=0.0, quantisation="mm", speckle=0.0,
+                             edge_dropout=0.0, left_band=0)  # fmt: skip
+    cfg = DepthSensorConfig(**{**base.__dict__, "multipath": 0.5})
+    zero = np.zeros(g.depth.shape, np.float32)
+    d0, d1 = (simulate_depth(g, K, zero, np.random.default_rng(0), c, edge_distance=edges).astype(float)
+              for c in (base, cfg))  # fmt: skip
+    both = (d0 > 0) & (d1 > 0)
+    bias = (d1 - d0)[both]
+    assert bias.min() >= -1 and bias.max() <= 51
+    near, far = both & (edges < 150), both & (edges > 1200)
+    assert (d1 - d0)[near].mean() > 30 and (d1 - d0)[far].mean() < 3

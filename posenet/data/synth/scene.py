@@ -15,8 +15,8 @@ import numpy as np
 
 from posenet.data.synth.body import TWIN_SHAPE, BodyShape, Outfit, body_primitives
 from posenet.data.synth.body_alt import alt_body_primitives
-from posenet.data.synth.primitives import Primitive
-from posenet.data.synth.raster import Intrinsics, rasterize
+from posenet.data.synth.primitives import SHELL, Primitive
+from posenet.data.synth.raster import GBuffer, Intrinsics, rasterize
 from posenet.data.synth.rig import Rig
 from posenet.data.synth.sensor import (
     ColourSensorConfig,
@@ -184,6 +184,28 @@ def visible_pixels(frame: Frame, rig: Rig, factor: int = 4) -> dict[tuple[int, i
     return out
 
 
+def room_edge_distance(
+    g: GBuffer, K: Intrinsics, world_to_cam: np.ndarray, room: list[Primitive], touch: float = 30.0
+) -> np.ndarray | None:
+    """``(H, W)`` mm from each pixel that lies on the room's shell (walls, ceiling, floor: within ``touch`` mm
+    of it) to the shell's nearest edge or corner, where two faces meet; inf elsewhere (None: no shell)."""
+    shell = next((p for p in room if p.kind == SHELL), None)
+    if shell is None:
+        return None
+    H, W = g.depth.shape
+    z = np.where(np.isfinite(g.depth), g.depth, 0.0)
+    du = (np.arange(W) - K.cx) / K.fx
+    dv = (np.arange(H) - K.cy) / K.fy
+    cam = np.stack([du[None, :] * z, dv[:, None] * z, z], -1)  # (H, W, 3)
+    R, t = world_to_cam[:3, :3], world_to_cam[:3, 3]
+    world = (cam - t) @ R  # R^T (p - t), row vectors
+    inside = np.sort(
+        shell.size - np.abs(world - shell.center), axis=-1
+    )  # (H, W, 3) distance to each face pair
+    on_shell = np.isfinite(g.depth) & (inside[..., 0] < touch)
+    return np.where(on_shell, inside[..., 1], np.inf)
+
+
 def render_view(
     frame: Frame,
     prims: list[Primitive],
@@ -210,8 +232,9 @@ def render_view(
     else:
         depth_cfg: DepthSensorConfig = look.depth
         colour_cfg: ColourSensorConfig = look.colour
+        edges = room_edge_distance(g, K, T, frame.room) if depth_cfg.multipath > 0 else None
         depth = simulate_depth(
-            g, K, np.where(hit, dropout[idx], 0), rng, depth_cfg, albedo[idx], specular[idx], owner
+            g, K, np.where(hit, dropout[idx], 0), rng, depth_cfg, albedo[idx], specular[idx], edges
         )
         color = shade_colour(
             g, K, albedo[idx], texture[idx], specular[idx], T, frame.lighting, rng, colour_cfg

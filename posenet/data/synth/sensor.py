@@ -57,7 +57,9 @@ class DepthSensorConfig:
     flying: float = 0.0  # share of the depth-edge pixels left by edge_dropout that get a mixed depth
     blob_holes: float = 0.0  # area share of clustered holes (smooth random field over a threshold)
     specular_holes: float = 0.0  # dropout on shiny surfaces seen head-on (saturated returns)
-    multipath: float = 0.0  # walls: depth += multipath * how far the pixel lies behind its neighbourhood
+    multipath: float = (
+        0.0  # walls: depth += multipath * 100 mm * exp(-distance to the room's nearest edge / 400 mm)
+    )
     fov_radius: float = 0.0  # > 0: pixels further than this share of the half diagonal are invalid
 
 
@@ -83,11 +85,12 @@ def simulate_depth(
     cfg: DepthSensorConfig | None = None,
     albedo: np.ndarray | None = None,
     specular: np.ndarray | None = None,
-    owner: np.ndarray | None = None,
+    edge_distance: np.ndarray | None = None,
 ) -> np.ndarray:
     """Sensor depth ``(H, W)`` uint16 mm from a G-buffer; ``dropout (H, W)`` is the per-pixel surface
-    dropout. ``albedo (H, W, 3)``, ``specular (H, W)`` and ``owner (H, W)`` (negative: room) feed the options
-    that need them (dark-surface noise, specular holes, multipath)."""
+    dropout. ``albedo (H, W, 3)``, ``specular (H, W)`` and ``edge_distance (H, W)`` (mm from a wall, floor or
+    ceiling pixel to the room's nearest edge or corner, inf elsewhere) feed the options that need them
+    (dark-surface noise, specular holes, multipath)."""
     cfg = cfg or DepthSensorConfig()
     z = g.depth.copy()
     H, W = z.shape
@@ -129,10 +132,10 @@ def simulate_depth(
         fly = edge & (draw >= p_hole) & (rng.random((H, W), dtype=np.float32) < cfg.flying)
         mix = rng.random(int(fly.sum())).astype(np.float32)
         zn[fly] = zmin[fly] + mix * (zmax[fly] - zmin[fly])
-    if cfg.multipath > 0 and owner is not None:  # light bouncing off nearby walls lengthens the path
-        zs = cv2.resize(z.astype(np.float32), (W // 8, H // 8), interpolation=cv2.INTER_AREA)
-        zs = cv2.resize(cv2.GaussianBlur(zs, (0, 0), 3), (W, H), interpolation=cv2.INTER_LINEAR)
-        zn = zn + np.where(owner < 0, cfg.multipath * np.clip(z - zs, 0, 400), 0)
+    if (
+        cfg.multipath > 0 and edge_distance is not None
+    ):  # light bouncing off the other wall lengthens the path
+        zn = zn + cfg.multipath * 100.0 * np.exp(-edge_distance / 400.0)
     if cfg.quantisation == "mm":
         zq = np.round(zn / cfg.quant_mm) * cfg.quant_mm
     else:  # disparity quantisation
