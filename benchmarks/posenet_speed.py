@@ -5,7 +5,9 @@ Usage::
     nice python benchmarks/posenet_speed.py --threads 2 [--json OUT.json]
 
 For each preset (``cpu``: 96x96 person crops, U-Net base 16; ``paper``: full 320x240 images, base 64) and each
-execution setting (fp32 / bf16 autocast x contiguous / channels_last), it times on random 3-view scenes of
+execution setting (fp32 / bf16 autocast x contiguous / channels_last; ``auto``: the precision this machine gets,
+channels_last, as the service and training run by default; ``onnxruntime`` / ``openvino``: the U-Net on an
+inference runtime, inference only), it times on random 3-view scenes of
 320x240 (the reader's ``subsample=2``):
 - inference: ms per scene for 1, 3 and 6 persons, all persons x views in one forward pass under
   ``torch.inference_mode`` (input building, U-Net, inverse warp, lifting and aggregation included);
@@ -26,19 +28,25 @@ import torch
 
 from posenet.augment import AugmentConfig
 from posenet.cameras import Camera
+from posenet.execution import machine_line
+from posenet.infer import PoseEstimator
 from posenet.inputs import InputConfig, build_scene
 from posenet.loss import mpjpe
 from posenet.model import ModelConfig, PoseNet
+from posenet.runtime import installed
 
 PRESETS = {
     "cpu": dict(inputs=InputConfig(mode="crop", crop_size=96, extra_depth=True), base=16, depth=3),
     "paper": dict(inputs=InputConfig(mode="full", extra_depth=False), base=64, depth=4),
 }
-SETTINGS = {  # name: (bf16, channels_last)
-    "fp32": (False, False),
-    "fp32+channels_last": (False, True),
-    "bf16": (True, False),
-    "bf16+channels_last": (True, True),
+SETTINGS = {  # name: (precision, channels_last, backend)
+    "fp32": ("fp32", False, "torch"),
+    "fp32+channels_last": ("fp32", True, "torch"),
+    "bf16": ("bf16", False, "torch"),
+    "bf16+channels_last": ("bf16", True, "torch"),
+    "auto": ("auto", True, "torch"),
+    "onnxruntime": ("auto", True, "onnxruntime"),
+    "openvino": ("auto", True, "openvino"),
 }
 
 
@@ -68,11 +76,14 @@ def median_time(fn, repeats: int) -> float:
 
 
 def bench(preset: str, setting: str, repeats: int, persons_list=(1, 3, 6)) -> dict:
-    bf16, cl = SETTINGS[setting]
-    cfg = ModelConfig(**PRESETS[preset], bf16=bf16, channels_last=cl)
+    precision, cl, backend = SETTINGS[setting]
+    cfg = ModelConfig(**PRESETS[preset], precision=precision, channels_last=cl)
     torch.manual_seed(0)
     model = PoseNet(cfg).eval()
-    row: dict = {"preset": preset, "setting": setting}
+    est = PoseEstimator(model)
+    est.use_backend(backend)
+    row: dict = {"preset": preset, "setting": setting, "backend": est.backend.name,
+                 "precision": est.precision.name}  # fmt: skip
     for P in persons_list:
         views, boxes, has = random_scene(P)
 
@@ -90,8 +101,8 @@ def bench(preset: str, setting: str, repeats: int, persons_list=(1, 3, 6)) -> di
     x = scene.images.contiguous(memory_format=torch.channels_last) if cl else scene.images
 
     def unet() -> None:
-        with torch.inference_mode(), model._autocast(x.device):
-            model.unet(x)
+        with torch.inference_mode():
+            model._unet(x)
 
     t = median_time(unet, repeats)
     row.update(
@@ -101,6 +112,8 @@ def bench(preset: str, setting: str, repeats: int, persons_list=(1, 3, 6)) -> di
         achieved_gflops_per_s=round(flops * x.shape[0] / t / 1e9, 1),
     )
 
+    if backend != "torch":
+        return row  # the runtimes run inference only
     # one training step per scene (3 persons, augmentation on)
     model.train()
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
@@ -128,15 +141,18 @@ def main() -> None:
     p.add_argument("--json", help="also write the rows to this json file")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
+    print(machine_line())
     rows = []
     for preset in args.presets:
         for setting in args.settings:
+            if SETTINGS[setting][2] != "torch" and not installed(SETTINGS[setting][2]):
+                continue
             row = bench(preset, setting, args.repeats, tuple(args.persons))
             rows.append(row)
             print(json.dumps(row), flush=True)
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"threads": args.threads, "torch": torch.__version__, "rows": rows}, f, indent=2)
+            json.dump({"threads": args.threads, "machine": machine_line(), "rows": rows}, f, indent=2)
 
 
 if __name__ == "__main__":
