@@ -29,7 +29,7 @@ import logging
 import os
 import threading
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -140,6 +140,20 @@ def export_onnx(
     return path
 
 
+# A call that a thread is running, and how to end it early from another thread (it then raises in the caller):
+# the service stops the work of a client that has disconnected (service/cancel.py).
+_stoppers: dict[int, Callable[[], object]] = {}
+
+
+def stop_call(thread: int) -> bool:
+    """End the runtime call that ``thread`` (a ``threading.get_ident()``) is running, if any: it raises there.
+    Returns whether there was one."""
+    stop = _stoppers.get(thread)
+    if stop is not None:
+        stop()
+    return stop is not None
+
+
 class OnnxRunner:
     """An exported graph called like the module it came from: torch tensors in, a tuple of tensors out.
 
@@ -187,12 +201,26 @@ class OnnxRunner:
         missing = set(self.input_names) - set(arrays)
         if missing:
             raise ValueError(f"the graph {self.path.name} needs inputs {sorted(missing)}")
+        thread = threading.get_ident()
         if self.backend == "onnxruntime":
-            outs = self._session.run(None, arrays)
+            import onnxruntime as ort
+
+            options = ort.RunOptions()
+            _stoppers[thread] = lambda: setattr(options, "terminate", True)
+            try:
+                outs = self._session.run(None, arrays, options)
+            finally:
+                _stoppers.pop(thread, None)
         else:
             request = getattr(self._local, "request", None)
             if request is None:
                 request = self._local.request = self._compiled.create_infer_request()
-            result = request.infer(arrays)
-            outs = [result[o] for o in self._compiled.outputs]
+            # Asynchronous start and wait rather than infer(): only an asynchronous request can be cancelled.
+            _stoppers[thread] = request.cancel
+            try:
+                request.start_async(arrays)
+                request.wait()
+            finally:
+                _stoppers.pop(thread, None)
+            outs = [request.results[o] for o in self._compiled.outputs]
         return tuple(torch.from_numpy(np.array(o, dtype=np.float32, copy=True)) for o in outs)

@@ -6,7 +6,9 @@ A thread cannot be killed, and a torch op cannot be interrupted from outside. Tw
   whether the request that the current thread works for has been cancelled, and raises :class:`Cancelled`;
 - between layers (building the crops, lifting and aggregating), :meth:`CancelToken.cancel` raises
   :class:`Cancelled` asynchronously in the worker thread (``PyThreadState_SetAsyncExc``), which Python
-  delivers at the thread's next bytecode, that is when the current torch op returns.
+  delivers at the thread's next bytecode, that is when the current torch op returns;
+- a network run by an inference runtime (``posenet.runtime``: OpenVINO, ONNX Runtime) is one long call, which
+  :func:`posenet.runtime.stop_call` ends (OpenVINO cancels the request, ONNX Runtime sets ``terminate``).
 
 So the work stops within one op or layer of the disconnect, not at the end of the frame. Both act only on a
 call run by :meth:`CancelToken.run`: other code and other threads (training, offline evaluation) are never
@@ -29,6 +31,8 @@ from typing import TypeVar
 import anyio
 import torch
 from starlette.types import Receive
+
+from posenet.runtime import stop_call
 
 T = TypeVar("T")
 _log = logging.getLogger("uvicorn.error")  # uvicorn's own log: shown at INFO with the default log config
@@ -79,6 +83,7 @@ class CancelToken:
             self.event.set()
             if self._thread is not None:
                 _async_raise(self._thread, Cancelled)
+                stop_call(self._thread)  # an inference runtime's call (OpenVINO, ONNX Runtime) ends at once
 
     def run(self, fn: Callable[[], T]) -> T:
         """``fn()`` in this thread, stopped by :class:`Cancelled` once :meth:`cancel` is called."""

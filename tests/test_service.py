@@ -400,10 +400,11 @@ def test_busy_models_get_503_and_a_gone_clients_work_stops(server, tiny):
     t0 = time.monotonic()
     while (r := post(server, scene, files)).status_code == 503 and time.monotonic() - t0 < 10:
         time.sleep(0.05)
+    freed = time.monotonic() - t0 - r.json()["timings"]["total"] / 1e3
     assert r.status_code == 200, r.text
-    assert time.monotonic() - t0 < 1.0 + r.json()["timings"]["total"] / 1e3
     stopped = re.findall(r"its work stopped (\d+) ms later", server_log(server)[log_before:])
     assert stopped and int(stopped[0]) < 1000, server_log(server)[log_before:]
+    assert freed < 1.0, f"the inference worker was free {freed:.2f} s after the close (stopped {stopped[0]} ms)"
 
 
 @pytest.mark.skipif(shutil.which("curl") is None, reason="the example script needs curl on PATH")
