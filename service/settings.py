@@ -49,7 +49,7 @@ class Settings(BaseSettings):
         32, ge=1, le=4096, description="requests receiving their body at once (beyond it: 503)"
     )
     # The pose network runs every person x view crop, so its time and memory grow with persons x views x crop
-    # pixels. 96 crops of 96x96 take 2 to 3.5 s and at most 1.6 GB (server RSS, both models) on 2 CPU cores; see
+    # pixels. 96 crops of 96x96 take at most 3.5 s and 1.9 GB (server RSS, both models) on 2 CPU cores; see
     # docs/service.md. In detector mode the best-supported persons that fit are kept.
     max_pose_pixels: int = Field(
         96 * 96 * 96,
