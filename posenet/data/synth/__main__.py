@@ -9,6 +9,8 @@ The MVOR twin (all 732 real frames, real rig, real 3D poses):
     --workers 2
 The unseen-look test set (the same frames, another renderer's look; never train on it):
     python -m posenet.data.synth --out data/mvor_alt --from-mvor ../shared/mvor/camma_mvor_2018.json --look alt
+A sequence (60 frames at 15 fps, 3 clinicians walking around the table, MVOR's rig):
+    python -m posenet.data.synth --out data/seq_mvorrig --sequence --frames 60 --persons 3 --rig mvor
 """
 
 from __future__ import annotations
@@ -45,6 +47,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="MVOR twin: one frame per real MVOR frame, with its rig and 3D poses",
     )
     src.add_argument("--scenes", type=int, help="procedural: this many frames, split evenly over --days")
+    src.add_argument(
+        "--sequence",
+        action="store_true",
+        help="sequences: persons walk around the table, work at it, enter and leave; one sequence of "
+        "--frames frames per day, stable person ids, each frame with its sequence, frame_index and timestamp_s",
+    )
     proc = p.add_argument_group("procedural scenes")
     proc.add_argument(
         "--rig",
@@ -52,10 +60,19 @@ def build_parser() -> argparse.ArgumentParser:
         default="random",
         help="random: a new ceiling-mounted 2-4 camera rig per day; mvor: MVOR's real three cameras",
     )
-    proc.add_argument("--days", type=int, default=4, help="recording days (the cross-validation unit)")
+    proc.add_argument(
+        "--days",
+        type=int,
+        default=None,
+        help="recording days (the cross-validation unit; default 4, or 1 sequence with --sequence)",
+    )
     proc.add_argument(
         "--views", type=int, default=None, help="cameras per random rig (default: 2 to 4 per day)"
     )
+    seq = p.add_argument_group("sequences (--sequence)")
+    seq.add_argument("--frames", type=int, default=60, help="frames per sequence")
+    seq.add_argument("--fps", type=float, default=15.0, help="frame rate")
+    seq.add_argument("--persons", type=int, default=3, help="clinicians per sequence")
     p.add_argument(
         "--mvor-annotations",
         default=os.environ.get("MVOR_ANNOTATIONS", str(DEFAULT_MVOR)),
@@ -80,8 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def config_from_args(args: argparse.Namespace) -> SynthConfig:
-    if (args.from_mvor is None) == (args.scenes is None):
-        raise SystemExit("error: give exactly one of --from-mvor ANNOTATIONS.json or --scenes N")
+    if (args.from_mvor is not None) + (args.scenes is not None) + args.sequence != 1:
+        raise SystemExit("error: give exactly one of --from-mvor ANNOTATIONS.json, --scenes N or --sequence")
     if args.from_mvor is not None:
         return SynthConfig(
             out=args.out,
@@ -94,11 +111,9 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
             stride=args.stride,
             look=args.look or "twin",
         )
-    return SynthConfig(
+    # Procedural scenes and sequences: the same procedural world, one frame at a time or over time.
+    common = dict(
         out=args.out,
-        mode="procedural",
-        scenes=args.scenes,
-        days=args.days,
         rig=args.rig,
         views=args.views,
         seed=args.seed,
@@ -106,6 +121,16 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
         mvor_annotations=args.mvor_annotations if args.rig == "mvor" else None,
         look=args.look or "random",
     )
+    if args.sequence:
+        return SynthConfig(
+            mode="sequence",
+            days=args.days or 1,
+            frames=args.frames,
+            fps=args.fps,
+            persons=args.persons,
+            **common,
+        )
+    return SynthConfig(mode="procedural", scenes=args.scenes, days=args.days or 4, **common)
 
 
 MVOR_HELP = (

@@ -34,12 +34,14 @@ from posenet.data.synth.looks import LOOKS, Look, make_look
 from posenet.data.synth.procedural import procedural_frame
 from posenet.data.synth.rig import Rig, random_rig
 from posenet.data.synth.scene import Frame, render_frame
+from posenet.data.synth.sequence import Stage, build_stage
 from posenet.data.synth.skeleton_full import NUM_MVOR_POINTS
 from posenet.data.synth.twin import TwinContext, load_twin, twin_frame
 from posenet.skeleton import BONES, JOINTS
 
-VERSION = "1.1"  # 1.1: looks (the twin look renders exactly what 1.0 rendered)
-MODE_CODES = {"procedural": 1, "twin": 2}
+VERSION = "1.1"  # 1.1: looks (the twin look renders exactly what 1.0 rendered); sequences are a new mode
+MODE_CODES = {"procedural": 1, "twin": 2, "sequence": 3}
+SEQUENCE_KEYS = ("frames", "fps", "persons")  # settings that only sequences have
 # MVOR's category block, 1-based bones as in the real file.
 CATEGORIES = [
     {
@@ -57,9 +59,9 @@ class SynthConfig:
     """Generator settings (saved in ``dataset_info.synthetic``)."""
 
     out: str
-    mode: str = "procedural"  # "procedural" (--scenes N) or "twin" (--from-mvor)
+    mode: str = "procedural"  # "procedural" (--scenes N), "twin" (--from-mvor) or "sequence" (--sequence)
     scenes: int = 100  # procedural frames in all, spread over the days
-    days: int = 4
+    days: int = 4  # sequences: one sequence per day
     rig: str = "random"  # "random" (a new rig per day) or "mvor"
     views: int | None = None  # cameras per random rig (None: 2 to 4, drawn per day)
     seed: int = 0
@@ -69,6 +71,9 @@ class SynthConfig:
     stride: int = 1  # twin: render every stride-th MVOR frame (quick fidelity checks)
     png_compression: int = 1  # cv2 PNG level: 1 is fast, the files barely shrink at higher levels
     look: str = "twin"  # "twin" (the look before looks existed), "random" (to train on) or "alt" (to test on)
+    frames: int = 60  # sequence: frames per sequence
+    fps: float = 15.0  # sequence: frame rate (the frames' timestamp_s)
+    persons: int = 3  # sequence: clinicians in the sequence (not all in the room all the time)
     version: str = VERSION
 
 
@@ -90,6 +95,7 @@ class JobResult:
     poses: list[dict]  # annotations3D without "id"
     seconds: float
     stats: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)  # further keys of the multi-view entry (sequences)
 
 
 def image_id(day: int, cam: int, frame: int) -> int:
@@ -196,6 +202,16 @@ def _init_worker(cfg: SynthConfig, rigs: DatasetRigs, twin: TwinContext | None) 
     cv2.setNumThreads(1)  # parallelism comes from the frame workers
 
 
+def sequence_stage(cfg: SynthConfig, rigs: DatasetRigs, day: int) -> tuple[Stage, dict]:
+    """Day ``day``'s sequence, built once per process from its own generators (the same in every worker)."""
+    stages = _STATE.setdefault("stages", {})
+    if day not in stages:
+        look = make_look(cfg.look, frame_rng(cfg.seed, cfg.mode, day, 0, purpose=4))
+        rng = frame_rng(cfg.seed, cfg.mode, day, 0, purpose=3)
+        stages[day] = build_stage(rng, rigs.rigs[day], cfg.frames, cfg.fps, cfg.persons, look)
+    return stages[day]
+
+
 def _build_frame(
     cfg: SynthConfig,
     rigs: DatasetRigs,
@@ -206,6 +222,9 @@ def _build_frame(
 ) -> tuple[Frame, dict]:
     if cfg.mode == "twin":
         return twin_frame(twin, twin.frames[job.index], rng, look)
+    if cfg.mode == "sequence":  # the sequence's look is applied once, to its stage
+        stage, stats = sequence_stage(cfg, rigs, job.day)
+        return stage.frame(job.frame), (stats if job.frame == 0 else {})
     rig = rigs.rigs[job.day]
     frame = procedural_frame(rng, enclose=rig.cam_to_world[:, :3, 3])
     if look is None:
@@ -300,7 +319,10 @@ def render_job(job: Job) -> JobResult:
             {"ref_camera": 0, "person_id": person.person_id, "image_ids": mv_id, "keypoints3D": flat}
         )
     stats = dict(stats, support=[int(s) for s in support if s > 0])
-    return JobResult(job.day, job.frame, images, boxes, poses, time.perf_counter() - t0, stats)
+    extra = {}
+    if cfg.mode == "sequence":
+        extra = {"sequence": job.day, "frame_index": job.frame, "timestamp_s": round(job.frame / cfg.fps, 6)}
+    return JobResult(job.day, job.frame, images, boxes, poses, time.perf_counter() - t0, stats, extra)
 
 
 # ------------------------------------------------------------------ the dataset
@@ -310,6 +332,10 @@ def plan_jobs(cfg: SynthConfig, twin: TwinContext | None) -> list[Job]:
     if cfg.mode == "twin":
         jobs = [Job(i, f.day, f.frame) for i, f in enumerate(twin.frames)][:: max(cfg.stride, 1)]
         return jobs if cfg.limit is None else jobs[: cfg.limit]
+    if cfg.mode == "sequence":
+        if cfg.frames < 1 or cfg.days < 1:
+            raise ValueError(f"need frames >= 1 and days >= 1, got frames={cfg.frames}, days={cfg.days}")
+        return [Job(d * cfg.frames + k, d + 1, k) for d in range(cfg.days) for k in range(cfg.frames)]
     if cfg.scenes < 1 or cfg.days < 1:
         raise ValueError(f"need scenes >= 1 and days >= 1, got scenes={cfg.scenes}, days={cfg.days}")
     per_day = np.array_split(np.arange(cfg.scenes), cfg.days)
@@ -358,7 +384,7 @@ def assemble(cfg: SynthConfig, rigs: DatasetRigs, results: list[JobResult]) -> d
     """The annotation json (MVOR's keys) from the frames' records, with sequential annotation ids."""
     multiview, images, annotations, poses3d = [], [], [], []
     for r in results:
-        multiview.append({"images": r.images, "id": "_".join(str(im["id"]) for im in r.images)})
+        multiview.append({"images": r.images, "id": "_".join(str(im["id"]) for im in r.images), **r.extra})
         images += r.images
         for b in r.boxes:
             annotations.append(dict(b, id=len(annotations)))
@@ -368,9 +394,8 @@ def assemble(cfg: SynthConfig, rigs: DatasetRigs, results: list[JobResult]) -> d
     for d in sorted(rigs.rigs):
         for k, num in enumerate(rigs.cam_numbers[d]):
             serials[rigs.rigs[d].serials[k]] = num
-    settings = {
-        k: v for k, v in asdict(cfg).items() if k not in ("out", "workers")
-    }  # output-independent settings
+    drop = ("out", "workers") + (() if cfg.mode == "sequence" else SEQUENCE_KEYS)
+    settings = {k: v for k, v in asdict(cfg).items() if k not in drop}  # output-independent settings
     info = {
         "version": VERSION,
         "description": f"or-pose synthetic RGB-D OR dataset ({cfg.mode})",
