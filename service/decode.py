@@ -2,6 +2,14 @@
 
 Sizes are read from the file header *before* decoding, so that a small, highly compressed image cannot make
 the server allocate gigabytes. Frames are decoded in memory only; nothing is written to disk or logged.
+
+**At the resolution the models read** (``reduce`` k, from :func:`reduction`): when a view is an exact multiple
+k of what the networks read (640x480 against the pose network's 320x240), it is brought to 1/k right here, in the
+decoding threads, with the reader's own functions (block mean for colour, lower median of the valid depths), so
+that every later stage handles a quarter of the pixels and a served frame meets the network exactly as in
+training. A JPEG colour image is decoded at 1/k directly by libjpeg's DCT scaling (``IMREAD_REDUCED_COLOR_k``),
+several times faster than a full decode. Coordinates in the API stay in the pixels of the image as sent
+(``service.validation`` scales cameras and boxes; ``service.response`` scales detections back).
 """
 
 from __future__ import annotations
@@ -11,7 +19,22 @@ import struct
 import cv2
 import numpy as np
 
+from posenet.data.images import subsample_color, subsample_depth
 from service.errors import PAYLOAD_TOO_LARGE, UNSUPPORTED_MEDIA, InputError
+
+_REDUCED_COLOR = {2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4, 8: cv2.IMREAD_REDUCED_COLOR_8}
+
+
+def reduction(width: int, height: int, read_size: tuple[int, int] | None) -> int:
+    """The largest k of 8, 4, 2 that divides a ``width`` x ``height`` image into one still at least ``read_size``
+    (W, H) in both axes; 1 when none does (or ``read_size`` is None: keep the image as sent)."""
+    if read_size is None:
+        return 1
+    for k in (8, 4, 2):
+        if width % k == 0 and height % k == 0 and width // k >= read_size[0] and height // k >= read_size[1]:
+            return k
+    return 1
+
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 JPEG_MAGIC = b"\xff\xd8\xff"
@@ -84,22 +107,30 @@ def _decode(data: bytes, name: str, flags: int, size: tuple[int, int]) -> np.nda
     return image
 
 
-def decode_color(data: bytes, name: str = "color", max_pixels: int = 1920 * 1200) -> np.ndarray:
-    """A colour PNG or JPEG to ``(H, W, 3)`` uint8 RGB (grey images are expanded to three channels)."""
+def decode_color(
+    data: bytes, name: str = "color", max_pixels: int = 1920 * 1200, reduce: int = 1
+) -> np.ndarray:
+    """A colour PNG or JPEG to ``(H / reduce, W / reduce, 3)`` uint8 RGB (grey images are expanded to three
+    channels). ``reduce`` must divide both sides (:func:`reduction`)."""
     size = _checked_size(data, name, max_pixels)
-    bgr = _decode(data, name, cv2.IMREAD_COLOR, size)
+    if reduce > 1 and image_format(data) == "jpeg":
+        bgr = _decode(data, name, _REDUCED_COLOR[reduce], (size[0] // reduce, size[1] // reduce))
+    else:
+        bgr = _decode(data, name, cv2.IMREAD_COLOR, size)
+        bgr = subsample_color(bgr, reduce)
     if bgr.dtype != np.uint8:
         raise InputError(f"{name} must be an 8-bit colour image, got {bgr.dtype}")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
 def decode_depth(
-    data: bytes, name: str = "depth", scale_mm: float = 1.0, max_pixels: int = 1920 * 1200
+    data: bytes, name: str = "depth", scale_mm: float = 1.0, max_pixels: int = 1920 * 1200, reduce: int = 1
 ) -> np.ndarray:
-    """A single-channel 16-bit depth PNG to ``(H, W)`` uint16 millimetres (0 = unknown).
+    """A single-channel 16-bit depth PNG to ``(H / reduce, W / reduce)`` uint16 millimetres (0 = unknown).
 
     ``scale_mm`` is the number of millimetres per stored unit; values are rounded to whole mm, and depths
-    beyond 65535 mm become unknown rather than wrapping around.
+    beyond 65535 mm become unknown rather than wrapping around. ``reduce`` takes the lower median of each
+    block's valid depths (the reader's ``subsample_depth``).
     """
     if image_format(data) == "jpeg":
         raise InputError(
@@ -126,4 +157,4 @@ def decode_depth(
         mm = np.rint(depth.astype(np.float64) * scale_mm)
         mm[mm > np.iinfo(np.uint16).max] = 0  # out of range: unknown, never a wrapped-around wrong depth
         depth = mm.astype(np.uint16)
-    return depth
+    return subsample_depth(depth, reduce)

@@ -24,8 +24,14 @@ from service.validation import ValidatedScene
 
 
 def _restore_sent_boxes(persons: list[PersonResult], scene: ValidatedScene) -> None:
-    """Replace each person's (clipped) reference boxes with the boxes as sent, in place."""
+    """Replace each person's (clipped) reference boxes with the boxes as sent, in place; detected boxes are
+    brought from the pixels they were decoded at back to the pixels of the images as sent."""
     if scene.boxes is None:
+        for person in persons:
+            for v, box in enumerate(person.boxes):
+                k = scene.reduced[v] if scene.reduced else 1
+                if box is not None and k != 1:
+                    person.boxes[v] = (np.asarray(box, np.float64) + 0.5) * k - 0.5
         return
     used: list[set[int]] = [set() for _ in scene.boxes]
     for person in persons:

@@ -221,7 +221,9 @@ async def post_scene(request: Request, pipeline: PipelineDep, settings: Settings
     scene_text, files = await _read_form(request, settings)
     if scene_text is None:
         raise InputError("missing form part 'scene' (the JSON with the views' cameras)")
-    limits = Limits(settings.max_views, settings.max_image_pixels, settings.max_boxes_per_view)
+    limits = Limits(
+        settings.max_views, settings.max_image_pixels, settings.max_boxes_per_view, pipeline.read_size
+    )
     need_color = "color" in pipeline.modalities
 
     def decode():

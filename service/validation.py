@@ -16,7 +16,7 @@ import pydantic
 import torch
 
 from posenet.cameras import Camera, is_rigid
-from service.decode import decode_color, decode_depth
+from service.decode import decode_color, decode_depth, header_size, reduction
 from service.errors import InputError
 from service.pipeline import FrameView
 from service.schemas import SceneIn, ViewIn
@@ -29,6 +29,9 @@ class Limits:
     max_views: int = 8
     max_image_pixels: int = 1920 * 1200
     max_boxes_per_view: int = 64
+    # (W, H) that the models read (ScenePipeline.read_size): views that are an exact multiple of it are decoded
+    # at that resolution (service.decode.reduction); None keeps every view as sent.
+    read_size: tuple[int, int] | None = None
 
 
 @dataclass
@@ -41,12 +44,15 @@ class ValidatedScene:
         person_ids: per view (K_v,) int64 client identities of the boxes, or None (match across views).
         sent_boxes: per view (K_v, 4) float64 boxes as the client sent them (``boxes`` is clipped to the
             image), or None: the response reports these.
+        reduced: per view the factor k its images were decoded smaller by (1: as sent). ``views`` and
+            ``boxes`` are in those reduced pixels (u' = (u + 0.5) / k - 0.5, as ``Camera.scale``).
     """
 
     views: list[FrameView]
     boxes: list[np.ndarray] | None
     person_ids: list[np.ndarray] | None
     sent_boxes: list[np.ndarray] | None = None
+    reduced: list[int] | None = None
 
 
 def parse_scene(text: str | bytes, limits: Limits) -> SceneIn:
@@ -126,15 +132,36 @@ def _decode_all(scene: SceneIn, files: Mapping[str, bytes], limits: Limits) -> d
     InputError."""
     jobs = {}
     for i, view in enumerate(scene.views):
+        k = _reduction(files, i, limits)
         if f"depth_{i}" in files:
             jobs[f"depth_{i}"] = _DECODERS.submit(
-                decode_depth, files[f"depth_{i}"], f"depth_{i}", view.depth_scale_mm, limits.max_image_pixels
+                decode_depth,
+                files[f"depth_{i}"],
+                f"depth_{i}",
+                view.depth_scale_mm,
+                limits.max_image_pixels,
+                k,
             )
         if f"color_{i}" in files:
             jobs[f"color_{i}"] = _DECODERS.submit(
-                decode_color, files[f"color_{i}"], f"color_{i}", limits.max_image_pixels
+                decode_color, files[f"color_{i}"], f"color_{i}", limits.max_image_pixels, k
             )
     return jobs
+
+
+def _reduction(files: Mapping[str, bytes], i: int, limits: Limits) -> int:
+    """View i's decoding factor: from its depth header, and only when its colour has the same size (else 1,
+    so that a size mismatch is reported in the pixels that were sent)."""
+    sizes = []
+    for part in (f"depth_{i}", f"color_{i}"):
+        if part in files:
+            try:
+                sizes.append(header_size(files[part], part))
+            except InputError:
+                return 1  # the decoder reports it
+    if not sizes or len(set(sizes)) != 1:
+        return 1
+    return reduction(*sizes[0], limits.read_size)
 
 
 def validate_scene(
@@ -178,35 +205,38 @@ def _validated(
     decoded: dict[str, Future],
 ) -> ValidatedScene:
     """The views in order, with the first error of the first view that has one (as a sequential check)."""
-    views, all_boxes, all_ids = [], [], []
+    views, all_boxes, all_ids, reduced = [], [], [], []
     for i, view in enumerate(scene.views):
         if f"depth_{i}" not in files:
             raise InputError(f"missing file part depth_{i}: every view needs a 16-bit depth PNG")
         depth = decoded[f"depth_{i}"].result()
-        height, width = depth.shape
+        k = _reduction(files, i, limits)
+        height, width = depth.shape[0] * k, depth.shape[1] * k  # as sent: every check and message uses these
         color = None
         if f"color_{i}" in files:
             color = decoded[f"color_{i}"].result()
             if color.shape[:2] != depth.shape:
                 raise InputError(
-                    f"color_{i} is {color.shape[1]}x{color.shape[0]} but depth_{i} is {width}x{height}: "
+                    f"color_{i} is {color.shape[1] * k}x{color.shape[0] * k} but depth_{i} is {width}x{height}: "
                     "the colour and depth of a view must be registered at the same size"
                 )
         elif need_color:
             why = "detection needs colour" if not reference_mode else "the pose network reads colour"
             raise InputError(f"missing file part color_{i} ({why}); send a PNG or JPEG colour image")
-        views.append(FrameView(color, depth, _camera(view, i, width, height)))
+        camera = _camera(view, i, width, height)
+        views.append(FrameView(color, depth, camera if k == 1 else camera.scale(1 / k)))
         boxes, ids = _boxes(view, i, width, height, limits)
-        all_boxes.append(boxes)
+        all_boxes.append(boxes if k == 1 else ((boxes + 0.5) / k - 0.5).astype(np.float32))
         all_ids.append(ids)
+        reduced.append(k)
     if not any(v.depth.any() for v in views):
         raise InputError(
             "every depth image holds only 0 (unknown), so no person can be lifted to 3D: send the sensor's "
             "16-bit depth in mm (check that the depth files are not blank and depth_scale_mm is right)"
         )
     if not reference_mode:
-        return ValidatedScene(views, None, None)
+        return ValidatedScene(views, None, None, reduced=reduced)
     has_ids = any(ids is not None for ids in all_ids)
     ids = [np.zeros(0, np.int64) if x is None else x for x in all_ids] if has_ids else None
     sent = [np.asarray(v.boxes or [], dtype=np.float64).reshape(-1, 4) for v in scene.views]
-    return ValidatedScene(views, all_boxes, ids, sent)
+    return ValidatedScene(views, all_boxes, ids, sent, reduced)

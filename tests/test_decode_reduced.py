@@ -1,0 +1,92 @@
+"""Decoding at the resolution the models read: the same pixels as the reader's subsampling, and every
+coordinate of the API still in the pixels of the images as sent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from posenet.data.images import subsample_color, subsample_depth
+from service.decode import decode_color, decode_depth, reduction
+from service.pipeline import PersonResult, SceneResult
+from service.response import _restore_sent_boxes
+from service.validation import Limits, parse_scene, validate_scene
+
+FRAME = Path(__file__).resolve().parents[1] / "examples" / "frame"
+
+
+def _files(color_format: str = "jpg") -> dict[str, bytes]:
+    files = {}
+    for i in range(3):
+        color = (FRAME / f"color_{i}.jpg").read_bytes()
+        if color_format == "png":
+            bgr = cv2.imdecode(np.frombuffer(color, np.uint8), cv2.IMREAD_COLOR)
+            color = cv2.imencode(".png", bgr)[1].tobytes()
+        files[f"color_{i}"] = color
+        files[f"depth_{i}"] = (FRAME / f"depth_{i}.png").read_bytes()
+    return files
+
+
+def test_reduction_factor():
+    assert reduction(640, 480, (320, 240)) == 2 and reduction(1280, 960, (320, 240)) == 4
+    assert reduction(640, 480, None) == 1 and reduction(641, 480, (320, 240)) == 1
+    assert reduction(320, 240, (320, 240)) == 1 and reduction(640, 480, (400, 240)) == 1
+
+
+def test_reduced_decoding_is_the_readers_subsampling():
+    files = _files("png")
+    full = decode_color(files["color_0"])
+    np.testing.assert_array_equal(decode_color(files["color_0"], reduce=2), subsample_color(full, 2))
+    depth = decode_depth(files["depth_0"])
+    np.testing.assert_array_equal(decode_depth(files["depth_0"], reduce=2), subsample_depth(depth, 2))
+    # A JPEG is decoded at half size by libjpeg's DCT scaling: close to the block mean, not equal.
+    jpeg = _files("jpg")["color_0"]
+    small = decode_color(jpeg, reduce=2)
+    assert small.shape == (240, 320, 3)
+    assert np.abs(small.astype(int) - subsample_color(decode_color(jpeg), 2).astype(int)).mean() < 2.0
+
+
+def test_cameras_and_boxes_follow_and_answers_keep_the_pixels_as_sent():
+    text = (FRAME / "scene_boxes.json").read_text()
+    limits = Limits(read_size=(320, 240))
+    full = validate_scene(parse_scene(text, Limits()), _files(), Limits(), True)
+    half = validate_scene(parse_scene(text, limits), _files(), limits, True)
+    assert half.reduced == [2, 2, 2] and full.reduced == [1, 1, 1]
+    assert half.views[0].depth.shape == (240, 320) and half.views[0].color.shape == (240, 320, 3)
+    point = torch.tensor([[150.0, -80.0, 2500.0]], dtype=torch.float64)
+    for a, b in zip(full.views, half.views, strict=True):
+        uv_full, uv_half = a.camera.project(point), b.camera.project(point)
+        torch.testing.assert_close(uv_half, (uv_full + 0.5) / 2 - 0.5)
+    for a, b in zip(full.boxes, half.boxes, strict=True):
+        np.testing.assert_allclose(b, (a + 0.5) / 2 - 0.5, atol=1e-4)
+    # Detector mode: boxes found in the reduced images are answered in the pixels of the images as sent.
+    detect = validate_scene(parse_scene((FRAME / "scene.json").read_text(), limits), _files(), limits, True)
+    person = PersonResult(0, np.zeros((10, 3)), np.zeros(10), [np.array([10.0, 20.0, 60.0, 120.0]), None, None],
+                          [0.9, None, None])  # fmt: skip
+    _restore_sent_boxes([person], detect)
+    np.testing.assert_allclose(person.boxes[0], [20.5, 40.5, 120.5, 240.5])
+    assert SceneResult("detector", [person]).persons[0].support == [0]
+
+
+@pytest.mark.parametrize("color_format", ["png", "jpg"])
+def test_served_frame_meets_the_network_as_offline(color_format):
+    """Reference boxes: the reduced decode gives the offline (full-resolution) joints; exactly for PNG colour,
+    where it runs the reader's own subsampling, and within 5 mm for JPEG's DCT-scaled decode."""
+    from service.pipeline import ScenePipeline
+
+    pipe = ScenePipeline.from_checkpoints(precision="fp32", backend="torch", load_detector=False)
+    text = (FRAME / "scene_boxes.json").read_text()
+    limits = Limits(read_size=pipe.read_size)
+    assert pipe.read_size == (320, 240)
+    full = validate_scene(parse_scene(text, Limits()), _files(color_format), Limits(), True)
+    half = validate_scene(parse_scene(text, limits), _files(color_format), limits, True)
+    a = pipe.run(full.views, full.boxes, full.person_ids)
+    b = pipe.run(half.views, half.boxes, half.person_ids)
+    assert [p.id for p in a.persons] == [p.id for p in b.persons] and a.persons
+    tol = 0.1 if color_format == "png" else 5.0  # mm (measured: 0.0 and 1.7)
+    for p, q in zip(a.persons, b.persons, strict=True):
+        np.testing.assert_allclose(q.joints, p.joints, atol=tol)
