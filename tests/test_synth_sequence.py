@@ -54,6 +54,10 @@ def test_persons_move_smoothly_with_constant_bones_and_some_come_and_go():
             assert np.ptp(bones[:, sides], axis=0).max() < 60
             moved += np.linalg.norm(pts[-1, :10].mean(0) - pts[0, :10].mean(0))
         assert moved > 500  # people walk around, they do not stand still
+        pelvis = {k: {f: p[4:6].mean(0)[:2] for f, p in v.items()} for k, v in tracks.items()}
+        gaps = [np.linalg.norm(pelvis[a][f] - pelvis[b][f]) for a in pelvis for b in pelvis if a < b
+                for f in set(pelvis[a]) & set(pelvis[b])]  # fmt: skip
+        assert min(gaps) > 300  # nobody walks into anyone
     assert came_or_went >= 1
 
 

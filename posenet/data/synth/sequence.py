@@ -35,14 +35,17 @@ POSTURE_SECONDS = (1.2, 3.0)  # time one posture is held while working
 WORK_POSTURES = ("standing", "bending", "reaching", "arms_raised", "turning")
 WORK_WEIGHTS = (0.2, 0.3, 0.25, 0.1, 0.15)
 SPOT_OFFSET = (250.0, 400.0)  # mm from the table's edge to a working person's pelvis
-PASS_OFFSET = 450.0  # mm further out while walking past the table
+PASS_OFFSET = 600.0  # mm further out while walking past the table
+SPACING = 700.0  # mm: a spot is chosen this far from where the persons drawn before will be, when it can
+SPOT_TRIES = 12
+MIN_GAP = 400.0  # mm between two persons' pelvis centres at any time (shoulders may brush when passing)
 ENTER_PROB, LEAVE_PROB = 0.35, 0.3  # per person (the first person is there from start to end)
 POSITION_SIGMA_S, YAW_SIGMA_S, POSE_SIGMA_S = 0.15, 0.3, 0.3  # temporal low-pass filters
 # No joint moves faster than this between frames. A blend of two postures can pass where the elbow's bending
 # plane is undefined (the forearm's target along the upper arm), and the forearm then flips; such scripts are
 # drawn again.
 MAX_JOINT_SPEED = 3000.0  # mm/s
-SCRIPT_TRIES = 30
+SCRIPT_TRIES = 40
 
 
 def _params_vector(p: PoseParams) -> np.ndarray:
@@ -116,9 +119,11 @@ def _draw_script(
     times: np.ndarray,
     may_come_and_go: bool,
     sector: float,
+    others: list[Script],
 ) -> Script:
     """Draw one person's script over the frame ``times (N,)``, seconds; it starts near ring coordinate
-    ``sector`` (persons start spread around the table)."""
+    ``sector`` (persons start spread around the table), and works at spots away from where the ``others``
+    (persons drawn before) are."""
     n, end = len(times), float(times[-1]) + 1e-6
     dt = float(times[1] - times[0]) if n > 1 else 1.0
     stature = float(np.clip(rng.normal(1720, 80), 1540, 1960))
@@ -133,6 +138,29 @@ def _draw_script(
         p, normal = ring.point(np.array([s]), np.array([d]))
         return p[0], _heading(-normal[0]) + float(rng.normal(0, 0.2))
 
+    def clearance(p: np.ndarray, t0: float) -> float:
+        """How close the others come to floor point ``p`` over the next WORK_SECONDS[1] from ``t0``."""
+        near = (times >= t0) & (times <= t0 + WORK_SECONDS[1])
+        gaps = [np.linalg.norm(o.xy[near & o.present] - p, axis=1) for o in others]
+        return min((float(g.min()) for g in gaps if len(g)), default=np.inf)
+
+    def free_spot(t0: float, s_from: float | None) -> tuple[float, float]:
+        """A ring coordinate and distance for the next spot (near ``sector`` first, then a step away from
+        ``s_from``): the first of SPOT_TRIES draws with SPACING to the others, else the one with the most."""
+        best, best_gap = None, -1.0
+        for _ in range(SPOT_TRIES):
+            if s_from is None:
+                cand = ((sector + rng.uniform(-0.08, 0.08)) % 1.0, rng.uniform(*SPOT_OFFSET))
+            else:
+                step = rng.choice([-1, 1]) * rng.uniform(0.15, 0.45)
+                cand = ((s_from + step) % 1.0, rng.uniform(*SPOT_OFFSET))
+            gap = clearance(ring.point(np.array([cand[0]]), np.array([cand[1]]))[0][0], t0)
+            if gap > best_gap:
+                best, best_gap = cand, gap
+            if gap >= SPACING:
+                break
+        return best
+
     def walk(t: float, path: np.ndarray) -> float:
         seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
         arrive = t + np.concatenate([[0.0], np.cumsum(seg)]) / speed
@@ -141,7 +169,7 @@ def _draw_script(
 
     t_in = rng.uniform(0, 0.4 * end) if may_come_and_go and rng.random() < ENTER_PROB else None
     t_out = rng.uniform(0.55 * end, 0.9 * end) if may_come_and_go and rng.random() < LEAVE_PROB else None
-    s, d = (sector + rng.uniform(-0.08, 0.08)) % 1.0, rng.uniform(*SPOT_OFFSET)
+    s, d = free_spot(t_in or 0.0, None)
     here, face = spot(s, d)
     t = 0.0
     if t_in is not None:  # from the door to the first spot, straight
@@ -158,8 +186,7 @@ def _draw_script(
         keys.append((t_stop, here, face, keys[-1][3], False))
         t = t_stop
         # Walk to another spot around the table, the shorter way, swinging out behind the others.
-        s_new = (s + rng.choice([-1, 1]) * rng.uniform(0.15, 0.45)) % 1.0
-        d_new = rng.uniform(*SPOT_OFFSET)
+        s_new, d_new = free_spot(t, s)
         ds = (s_new - s + 0.5) % 1.0 - 0.5
         k = max(int(abs(ds) * 60), 4)
         ss = s + ds * np.linspace(0, 1, k)
@@ -217,17 +244,27 @@ def _points(sc: Script, k: int) -> np.ndarray:
     return place(build_pose(sc.params[k]), sc.xy[k], float(sc.yaw[k]))
 
 
-def _script(rng: np.random.Generator, ring: TableRing, door: np.ndarray, times: np.ndarray, *args) -> Script:
-    """:func:`_draw_script`, drawn again while some annotated joint moves faster than MAX_JOINT_SPEED (after
-    SCRIPT_TRIES draws the last is kept)."""
+def _script(rng: np.random.Generator, times: np.ndarray, others: list[Script], **where) -> Script:
+    """:func:`_draw_script` (``where``: its ring, door, may_come_and_go and sector), drawn again while some annotated joint moves faster than MAX_JOINT_SPEED or the
+    person comes closer than MIN_GAP to one of the ``others`` (walking into someone); after SCRIPT_TRIES draws,
+    the smooth draw that keeps the largest gap is kept."""
     limit = MAX_JOINT_SPEED * (float(times[1] - times[0]) if len(times) > 1 else 1.0)
+    best, best_gap = None, -1.0
     for _ in range(SCRIPT_TRIES):
-        sc = _draw_script(rng, ring, door, times, *args)
+        sc = _draw_script(rng, times=times, others=others, **where)
+        both = [sc.present & o.present for o in others]
+        gap = min((np.linalg.norm(sc.xy[m] - o.xy[m], axis=1).min() for o, m in zip(others, both, strict=True)
+                   if m.any()), default=np.inf)  # fmt: skip
+        if gap <= best_gap:
+            continue  # no better than the best so far: not worth building its poses
         ks = np.flatnonzero(sc.present)
         pts = np.stack([_points(sc, k)[:NUM_MVOR_POINTS] for k in ks])  # (T, 12, 3)
-        if len(ks) < 2 or np.linalg.norm(np.diff(pts, axis=0), axis=-1).max() <= limit:
+        if len(ks) > 1 and np.linalg.norm(np.diff(pts, axis=0), axis=-1).max() > limit:
+            continue
+        best, best_gap = sc, gap
+        if gap >= MIN_GAP:
             break
-    return sc
+    return best if best is not None else sc
 
 
 @dataclass
@@ -288,7 +325,10 @@ def build_stage(
     u = np.array([np.cos(a), np.sin(a)])
     reach = np.min((room.half_extent[:2] - 350) / np.maximum(np.abs(u), 1e-6))
     door = room.table_center[:2] + u * reach
-    scripts = [_script(rng, ring, door, times, i > 0, i / persons) for i in range(persons)]
+    scripts: list[Script] = []
+    for i in range(persons):  # one after another, each keeping clear of those before
+        where = dict(ring=ring, door=door, may_come_and_go=i > 0, sector=i / persons)
+        scripts.append(_script(rng, times, list(scripts), **where))
     people = [Person(np.zeros((1, 3)), sample_outfit(rng), i) for i in range(persons)]
     patient = None
     if rng.random() < patient_prob:
