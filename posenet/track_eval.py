@@ -1,0 +1,159 @@
+"""How well a tracker follows people over a sequence: identities, smoothness, plausible bones, cost.
+
+:func:`evaluate` runs a :class:`posenet.track.Tracker` over a sequence's frames (the pose pipeline's persons
+and the ground truth) and measures:
+
+- **Identities** with ``motmetrics`` (CLEAR MOT and IDF1): a confirmed track and a ground-truth person can match
+  when their mean joint distance is at most ``gate_mm`` (3D, mm). MOTA, IDF1, id switches, and switches per 1,000
+  ground-truth person-frames.
+- **Per-frame against smoothed MPJPE** (cm), on the same matched pairs: the pipeline's joints as they came, and
+  the tracker's.
+- **Acceleration error** (mm/frame^2): the mean over joints of ``|a_pred - a_gt|``, with ``a = x[t+1] - 2 x[t] +
+  x[t-1]``, wherever a person is matched in three consecutive frames (the usual jitter figure of video pose
+  estimation); per-frame against smoothed.
+- **Bone lengths**: per track, the standard deviation over time of each bone's length (mm); the mean over
+  tracks of each bone's, and the largest of those. Beside it the same for the per-frame joints (per ground-truth
+  person) and for the ground truth itself (a twisting trunk changes the shoulder-to-hip sides by ~1 cm).
+- **Cost**: the tracker's milliseconds per frame (mean and 95th percentile).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+
+import numpy as np
+
+from posenet.skeleton import BONES, NUM_JOINTS
+from posenet.track import Tracker, bone_lengths, mean_joint_distance
+
+MM_PER_CM = 10.0
+# Issue 15's goals: (figure, comparison, bound).
+GOALS = {
+    "idf1": (">=", 0.95),
+    "switches_per_1000": ("<=", 1.0),
+    "mpjpe_ratio": ("<=", 0.9),
+    "accel_ratio": ("<=", 0.5),
+    "bone_std_max_mm": ("<=", 10.0),
+    "track_ms_mean": ("<=", 2.0),
+}
+
+
+@dataclass
+class SequenceFrame:
+    """One frame of a sequence: its time, the ground truth and the pipeline's persons.
+
+    gt_ids: (G,) person ids; gt_joints: (G, J, 3) mm; joints: (P, J, 3) mm; spread: (P, J) mm.
+    """
+
+    timestamp_s: float
+    gt_ids: np.ndarray
+    gt_joints: np.ndarray
+    joints: np.ndarray
+    spread: np.ndarray
+
+
+def _bone_std(lengths: dict) -> tuple[list[float], float]:
+    """Per bone, the mean over tracks of the std over time (mm), and its largest, from ``{track: [(B,), ...]}``."""
+    per_track = [np.std(np.array(v), axis=0) for v in lengths.values() if len(v) >= 2]
+    if not per_track:
+        return [float("nan")] * len(BONES), float("nan")
+    mean = np.mean(per_track, axis=0)
+    return [round(float(x), 2) for x in mean], round(float(mean.max()), 2)
+
+
+def _accel_error(series: dict) -> float:
+    """Mean acceleration error (mm/frame^2) over ``{gt id: {frame: (pred (J, 3), gt (J, 3))}}``."""
+    errors = []
+    for frames in series.values():
+        for f in frames:
+            if f - 1 in frames and f + 1 in frames:
+                pred = frames[f + 1][0] - 2 * frames[f][0] + frames[f - 1][0]
+                gt = frames[f + 1][1] - 2 * frames[f][1] + frames[f - 1][1]
+                errors.append(np.linalg.norm(pred - gt, axis=-1).mean())
+    return round(float(np.mean(errors)), 2) if errors else float("nan")
+
+
+def evaluate(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = 500.0) -> dict:
+    """Track one sequence's ``frames`` (in time order) with ``tracker`` and measure it (module docstring)."""
+    import motmetrics as mm  # imported here: pandas takes a while, and only the evaluation needs it
+
+    acc = mm.MOTAccumulator(auto_id=True)
+    ms, hyps = [], []
+    for fr in frames:
+        t0 = time.perf_counter()
+        out = tracker.update(fr.joints, fr.spread, fr.timestamp_s)
+        ms.append((time.perf_counter() - t0) * 1e3)
+        confirmed = [p for p in out if p.track_id is not None]
+        hyps.append({p.track_id: p for p in confirmed})
+        smoothed = np.array([p.joints for p in confirmed]).reshape(len(confirmed), NUM_JOINTS, 3)
+        dist = mean_joint_distance(fr.gt_joints.reshape(-1, NUM_JOINTS, 3), smoothed)  # (G, H)
+        acc.update(
+            fr.gt_ids.tolist(), [p.track_id for p in confirmed], np.where(dist <= gate_mm, dist, np.nan)
+        )
+    mh = mm.metrics.create()
+    summary = mh.compute(acc, metrics=["mota", "idf1", "num_switches", "num_objects", "num_false_positives",
+                                       "num_misses", "num_frames"], name="s")  # fmt: skip
+    row = summary.loc["s"]
+    # The matched pairs (frame, gt id, track id), as motmetrics matched them.
+    events = acc.mot_events
+    pairs = events[events["Type"].isin(["MATCH", "SWITCH"])]
+    raw_err, smooth_err = [], []
+    raw_series, smooth_series = defaultdict(dict), defaultdict(dict)
+    raw_bones, smooth_bones, gt_bones = defaultdict(list), defaultdict(list), defaultdict(list)
+    for (f, _), ev in pairs.iterrows():
+        fr, gid, tid = frames[f], int(ev["OId"]), int(ev["HId"])
+        gt = fr.gt_joints[list(fr.gt_ids).index(gid)]
+        person = hyps[f][tid]
+        raw_err.append(np.linalg.norm(person.raw - gt, axis=-1).mean())
+        smooth_err.append(np.linalg.norm(person.joints - gt, axis=-1).mean())
+        raw_series[gid][f] = (person.raw, gt)
+        smooth_series[gid][f] = (person.joints, gt)
+        raw_bones[gid].append(bone_lengths(person.raw))
+        smooth_bones[tid].append(bone_lengths(person.joints))
+        gt_bones[gid].append(bone_lengths(gt))
+    objects = int(row["num_objects"])
+    mpjpe_raw = float(np.mean(raw_err)) / MM_PER_CM if raw_err else float("nan")
+    mpjpe_smooth = float(np.mean(smooth_err)) / MM_PER_CM if smooth_err else float("nan")
+    accel_raw, accel_smooth = _accel_error(raw_series), _accel_error(smooth_series)
+    bones_smooth, bones_smooth_max = _bone_std(smooth_bones)
+    bones_raw, bones_raw_max = _bone_std(raw_bones)
+    bones_gt, bones_gt_max = _bone_std(gt_bones)
+    return {
+        "frames": len(frames),
+        "gt_person_frames": objects,
+        "tracks": len({t for h in hyps for t in h}),
+        "gt_persons": len({int(i) for fr in frames for i in fr.gt_ids}),
+        "mota": round(float(row["mota"]), 4),
+        "idf1": round(float(row["idf1"]), 4),
+        "id_switches": int(row["num_switches"]),
+        "switches_per_1000": round(1000 * int(row["num_switches"]) / max(objects, 1), 2),
+        "false_positives": int(row["num_false_positives"]),
+        "misses": int(row["num_misses"]),
+        "mpjpe_per_frame_cm": round(mpjpe_raw, 2),
+        "mpjpe_smoothed_cm": round(mpjpe_smooth, 2),
+        "mpjpe_ratio": round(mpjpe_smooth / mpjpe_raw, 3),
+        "accel_per_frame_mm": accel_raw,
+        "accel_smoothed_mm": accel_smooth,
+        "accel_ratio": round(accel_smooth / accel_raw, 3),
+        "bone_std_mm": bones_smooth,
+        "bone_std_max_mm": bones_smooth_max,
+        "bone_std_per_frame_max_mm": bones_raw_max,
+        "bone_std_per_frame_mm": bones_raw,
+        "bone_std_ground_truth_max_mm": bones_gt_max,
+        "bone_std_ground_truth_mm": bones_gt,
+        "track_ms_mean": round(float(np.mean(ms)), 3),
+        "track_ms_p95": round(float(np.percentile(ms, 95)), 3),
+        "gate_mm": gate_mm,
+    }
+
+
+def goal_lines(figures: dict) -> list[str]:
+    """One line per goal of :data:`GOALS`: the figure, the bound and whether it is met."""
+    lines = []
+    for key, (op, bound) in GOALS.items():
+        value = figures[key]
+        met = value >= bound if op == ">=" else value <= bound
+        lines.append(f"{key:>20} {value:>8} (goal {op} {bound}) {'met' if met else 'NOT met'}")
+    return lines
