@@ -178,18 +178,22 @@ class OnnxRunner:
             self._session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
             self.input_names = [i.name for i in self._session.get_inputs()]
         elif backend == "openvino":
-            import openvino as ov
-
-            hint = "bf16" if self.precision.bf16 else "f32"
-            self._compiled = ov.Core().compile_model(
-                str(self.path),
-                "CPU",
-                {"INFERENCE_NUM_THREADS": threads, "INFERENCE_PRECISION_HINT": hint, "NUM_STREAMS": 1},
-            )
+            self._threads = threads
+            self._compile()
             self.input_names = [p.get_any_name() for p in self._compiled.inputs]
             self._local = threading.local()  # an infer request per thread: requests are not thread-safe
         else:
             raise ValueError(f"OnnxRunner runs onnxruntime or openvino, not {backend!r}")
+
+    def _compile(self) -> None:
+        import openvino as ov
+
+        hint = "bf16" if self.precision.bf16 else "f32"
+        self._compiled = ov.Core().compile_model(
+            str(self.path),
+            "CPU",
+            {"INFERENCE_NUM_THREADS": self._threads, "INFERENCE_PRECISION_HINT": hint, "NUM_STREAMS": 1},
+        )
 
     def __call__(self, **inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """Run on named inputs; inputs that the graph does not use (pruned by the export) are ignored."""
@@ -212,15 +216,30 @@ class OnnxRunner:
             finally:
                 _stoppers.pop(thread, None)
         else:
+            compiled = self._compiled
             request = getattr(self._local, "request", None)
-            if request is None:
-                request = self._local.request = self._compiled.create_infer_request()
+            if request is None or getattr(self._local, "compiled", None) is not compiled:
+                request = self._local.request = compiled.create_infer_request()
+                self._local.compiled = compiled
             # Asynchronous start and wait rather than infer(): only an asynchronous request can be cancelled.
             _stoppers[thread] = request.cancel
             try:
                 request.start_async(arrays)
                 request.wait()
+            except BaseException:
+                # Cancelled, or interrupted (service.cancel raises in this thread). A cancelled run leaves the
+                # compiled model's shapes half-updated: the next run with another batch size then fails shape
+                # inference inside OpenVINO 2026.4 ("Concat ... {96,...},{5,...}"). So wait for this run to end
+                # and compile the graph afresh (a fraction of a second, paid once after a disconnect).
+                try:
+                    request.cancel()
+                    request.wait()
+                except Exception:
+                    pass
+                self._local.request = None
+                self._compile()
+                raise
             finally:
                 _stoppers.pop(thread, None)
-            outs = [request.results[o] for o in self._compiled.outputs]
+            outs = [request.results[o] for o in compiled.outputs]
         return tuple(torch.from_numpy(np.array(o, dtype=np.float32, copy=True)) for o in outs)

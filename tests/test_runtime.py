@@ -160,3 +160,37 @@ def test_model_route_says_how_each_network_runs_and_on_what(tmp_path):
     for r in runtime.values():
         assert r["backend"] == backend and r["precision"] == "fp32" and r["precision_reason"]
     assert info["machine"]["torch_capability"] and info["machine"]["cores"] >= 1
+
+
+@pytest.mark.skipif(not installed("openvino"), reason="openvino is not installed")
+def test_a_cancelled_openvino_call_leaves_the_runner_usable(tmp_path, monkeypatch):
+    """OpenVINO 2026.4 keeps a cancelled run's shapes: the next run at another batch size failed shape inference
+    (Concat {96,...} against {5,...}) until the runner compiled its graph afresh after a cancel."""
+    import threading
+    import time
+
+    from posenet.infer import PoseEstimator
+    from posenet.runtime import stop_call
+
+    monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
+    est = PoseEstimator.from_checkpoint(None, precision="fp32", backend="openvino", threads=2)
+    cfg = est.model.config
+    big = torch.randn(96, cfg.inputs.in_channels, 96, 96)
+    small = torch.randn(5, cfg.inputs.in_channels, 96, 96)
+    outcome = {}
+
+    def work():
+        try:
+            outcome["out"] = est.model.runner(x=big)
+        except RuntimeError as exc:
+            outcome["error"] = str(exc)
+
+    for _ in range(3):  # a cancel lands mid-run on at least one try
+        t = threading.Thread(target=work)
+        t.start()
+        time.sleep(0.02)
+        stop_call(t.ident)
+        t.join()
+    with torch.inference_mode():
+        ref = est.model.unet(small)
+    torch.testing.assert_close(est.model.runner(x=small)[0], ref, atol=1e-3, rtol=1e-3)
