@@ -31,7 +31,7 @@ from detector.checkpoint import load_checkpoint
 from detector.inputs import prepare_views
 from detector.model import DetectorConfig
 from posenet.execution import Precision, resolve_precision
-from posenet.runtime import Backend, OnnxRunner, export_onnx, resolve_backend
+from posenet.runtime import Backend, OnnxRunner, export_onnx, load_runner
 
 DEFAULT_WEIGHTS = Path(__file__).parent / "weights" / "default.safetensors"
 
@@ -130,18 +130,9 @@ class PersonDetector:
 
     def use_backend(self, backend: str = "auto", threads: int | None = None) -> Backend:
         """Run the network on ``backend`` from now on; a failing export or runtime falls back to torch."""
-        chosen = resolve_backend(backend, self.device)
-        self.runner = None
-        if chosen.name != "torch":
-            try:
-                self._graph_shape = tuple(self._example()[0].shape[1:])  # (C, H, W)
-                self.runner = OnnxRunner(
-                    self.export(), chosen.name, threads or torch.get_num_threads(), self._precision
-                )
-            except Exception as exc:  # any failure of a runtime must leave a working (torch) detector
-                chosen = Backend("torch", f"{chosen.name} failed ({type(exc).__name__}: {exc}); using torch")
-        self.backend = chosen
-        return chosen
+        self._graph_shape = tuple(self._example()[0].shape[1:])  # (C, H, W) of the exported graph's input
+        self.runner, self.backend = load_runner(backend, self.device, self.export, threads, self._precision)
+        return self.backend
 
     def _example(self) -> tuple[torch.Tensor, torch.Tensor]:
         """Inputs of two blank 4:3 views (MVOR's aspect): the shape that the exported graph takes."""

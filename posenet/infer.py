@@ -26,7 +26,7 @@ from posenet.cameras import Camera
 from posenet.checkpoint import load_checkpoint
 from posenet.inputs import build_scene
 from posenet.model import PoseNet, predict_scenes
-from posenet.runtime import Backend, OnnxRunner, export_onnx, resolve_backend
+from posenet.runtime import Backend, export_onnx, load_runner
 
 Tensor = torch.Tensor
 
@@ -78,17 +78,10 @@ class PoseEstimator:
         """Run the U-Net on ``backend`` from now on (exported to ONNX on first use; see ``posenet.runtime``).
 
         A failing export or runtime falls back to torch; ``self.backend.reason`` then says why."""
-        chosen = resolve_backend(backend, self.device)
-        self.model.runner = None
-        if chosen.name != "torch":
-            try:
-                self.model.runner = OnnxRunner(
-                    self.export(), chosen.name, threads or torch.get_num_threads(), self.model.precision()
-                )
-            except Exception as exc:  # any failure of a runtime must leave a working (torch) model
-                chosen = Backend("torch", f"{chosen.name} failed ({type(exc).__name__}: {exc}); using torch")
-        self.backend = chosen
-        return chosen
+        self.model.runner, self.backend = load_runner(
+            backend, self.device, self.export, threads, self.model.precision()
+        )
+        return self.backend
 
     def export(self, folder: Path | None = None) -> Path:
         """The U-Net as an ONNX graph (cached by a hash of its weights; see ``posenet.runtime``)."""

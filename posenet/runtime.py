@@ -78,6 +78,24 @@ def resolve_backend(requested: str | None = "auto", device: str | torch.device =
     return Backend("torch", "auto: neither openvino nor onnxruntime is installed")
 
 
+def load_runner(
+    backend: str | None,
+    device: str | torch.device,
+    export: Callable[[], Path],
+    threads: int | None,
+    precision: Precision,
+) -> tuple[OnnxRunner | None, Backend]:
+    """The runner of ``backend`` for the graph that ``export()`` builds, or None for torch; and the backend that
+    runs. Any failure of an export or a runtime falls back to torch, with the reason, so a model always runs."""
+    chosen = resolve_backend(backend, device)
+    if chosen.name == "torch":
+        return None, chosen
+    try:
+        return OnnxRunner(export(), chosen.name, threads or torch.get_num_threads(), precision), chosen
+    except Exception as exc:  # a broken runtime must leave a working (torch) model
+        return None, Backend("torch", f"{chosen.name} failed ({type(exc).__name__}: {exc}); using torch")
+
+
 def cache_dir() -> Path:
     return Path(os.environ.get("ORPOSE_CACHE_DIR", Path.home() / ".cache" / "or-pose"))
 

@@ -131,13 +131,13 @@ def test_runtime_matches_torch_on_the_example_frame(backend, example_frame, cach
 
 
 def test_a_failing_runtime_falls_back_to_torch(monkeypatch, tmp_path):
-    import posenet.infer
+    import posenet.runtime
     from posenet.infer import PoseEstimator
 
     def broken(*args, **kwargs):
         raise RuntimeError("no such runtime here")
 
-    monkeypatch.setattr(posenet.infer, "OnnxRunner", broken)
+    monkeypatch.setattr(posenet.runtime, "OnnxRunner", broken)
     monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
     est = PoseEstimator.from_checkpoint(None, precision="fp32", backend=RUNTIMES[0] if RUNTIMES else "torch")
     assert est.backend.name == "torch"
