@@ -10,9 +10,9 @@ bf16 autocast only where this machine computes bf16 natively, ``posenet.executio
 (``backend``, ``posenet.runtime``), which runs a graph exported from the same weights.
 
 Where the time went (``torch.profiler``, RT-DETR ``cpu`` preset, 3 views of 160x120): 70 % in the ResNet's 62
-convolutions, which on an AVX2-only CPU ran 5x slower in torch's default NCHW layout than in channels_last (oneDNN
-reorders every NCHW activation); max-pool and batch norm next. channels_last removes the reorders; an inference
-runtime also folds the batch norms into the convolutions (``benchmarks/detector_speed.py``).
+convolutions, then max-pool and batch norm. channels_last removes oneDNN's reorders of NCHW activations (20.2 ->
+17.2 ms per view with torch capped to AVX2, 22.2 -> 21.5 ms with AVX512, benchmarks/RESULTS.md); an inference
+runtime also folds the batch norms into the convolutions (OpenVINO: 12.2 ms per view, ``benchmarks/detector_speed.py``).
 """
 
 from __future__ import annotations

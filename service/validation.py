@@ -127,12 +127,14 @@ def _boxes(
 _DECODERS = ThreadPoolExecutor(max_workers=4, thread_name_prefix="decode")
 
 
-def _decode_all(scene: SceneIn, files: Mapping[str, bytes], limits: Limits) -> dict[str, Future]:
+def _decode_all(
+    scene: SceneIn, files: Mapping[str, bytes], limits: Limits, reduced: list[int]
+) -> dict[str, Future]:
     """Start decoding every view's colour and depth part; ``result()`` returns the image or raises its
     InputError."""
     jobs = {}
     for i, view in enumerate(scene.views):
-        k = _reduction(files, i, limits)
+        k = reduced[i]
         if f"depth_{i}" in files:
             jobs[f"depth_{i}"] = _DECODERS.submit(
                 decode_depth,
@@ -188,9 +190,10 @@ def validate_scene(
     if not reference_mode and any(v.person_ids is not None for v in scene.views):
         raise InputError("person_ids were given without boxes")
     need_color = need_color or not reference_mode  # the detector reads colour
-    decoded = _decode_all(scene, files, limits)
+    reduced = [_reduction(files, i, limits) for i in range(len(scene.views))]
+    decoded = _decode_all(scene, files, limits, reduced)
     try:
-        return _validated(scene, files, limits, need_color, reference_mode, decoded)
+        return _validated(scene, files, limits, need_color, reference_mode, decoded, reduced)
     finally:
         for job in decoded.values():
             job.cancel()  # after an error: drop what has not started
@@ -203,14 +206,15 @@ def _validated(
     need_color: bool,
     reference_mode: bool,
     decoded: dict[str, Future],
+    reduced: list[int],
 ) -> ValidatedScene:
     """The views in order, with the first error of the first view that has one (as a sequential check)."""
-    views, all_boxes, all_ids, reduced = [], [], [], []
+    views, all_boxes, all_ids = [], [], []
     for i, view in enumerate(scene.views):
         if f"depth_{i}" not in files:
             raise InputError(f"missing file part depth_{i}: every view needs a 16-bit depth PNG")
         depth = decoded[f"depth_{i}"].result()
-        k = _reduction(files, i, limits)
+        k = reduced[i]
         height, width = depth.shape[0] * k, depth.shape[1] * k  # as sent: every check and message uses these
         color = None
         if f"color_{i}" in files:
@@ -228,7 +232,6 @@ def _validated(
         boxes, ids = _boxes(view, i, width, height, limits)
         all_boxes.append(boxes if k == 1 else ((boxes + 0.5) / k - 0.5).astype(np.float32))
         all_ids.append(ids)
-        reduced.append(k)
     if not any(v.depth.any() for v in views):
         raise InputError(
             "every depth image holds only 0 (unknown), so no person can be lifted to 3D: send the sensor's "
