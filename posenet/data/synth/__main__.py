@@ -81,6 +81,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--limit", type=int, default=None, help="twin: render only the first N MVOR frames")
     p.add_argument("--stride", type=int, default=1, help="twin: render every K-th MVOR frame (quick checks)")
     p.add_argument(
+        "--mvor-days",
+        type=int,
+        nargs="+",
+        metavar="D",
+        help="twin: render only these MVOR days, e.g. 1 2 3 for a training set that never holds day 4's poses",
+    )
+    p.add_argument(
         "--seed", type=int, default=0, help="same seed, same bytes (per-frame seeds from seed/day/frame)"
     )
     p.add_argument(
@@ -109,6 +116,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
             mvor_annotations=args.from_mvor,
             limit=args.limit,
             stride=args.stride,
+            mvor_days=args.mvor_days,
             look=args.look or "twin",
         )
     # Procedural scenes and sequences: the same procedural world, one frame at a time or over time.

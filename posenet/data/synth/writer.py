@@ -69,6 +69,7 @@ class SynthConfig:
     mvor_annotations: str | None = None  # MVOR json (twin mode, or the MVOR rig)
     limit: int | None = None  # twin: render only the first N MVOR frames (tests, benchmarks)
     stride: int = 1  # twin: render every stride-th MVOR frame (quick fidelity checks)
+    mvor_days: list[int] | None = None  # twin: render only these MVOR days (None: all four)
     png_compression: int = 1  # cv2 PNG level: 1 is fast, the files barely shrink at higher levels
     look: str = "twin"  # "twin" (the look before looks existed), "random" (to train on) or "alt" (to test on)
     frames: int = 60  # sequence: frames per sequence
@@ -330,7 +331,8 @@ def render_job(job: Job) -> JobResult:
 
 def plan_jobs(cfg: SynthConfig, twin: TwinContext | None) -> list[Job]:
     if cfg.mode == "twin":
-        jobs = [Job(i, f.day, f.frame) for i, f in enumerate(twin.frames)][:: max(cfg.stride, 1)]
+        frames = [(i, f) for i, f in enumerate(twin.frames) if not cfg.mvor_days or f.day in cfg.mvor_days]
+        jobs = [Job(i, f.day, f.frame) for i, f in frames][:: max(cfg.stride, 1)]
         return jobs if cfg.limit is None else jobs[: cfg.limit]
     if cfg.mode == "sequence":
         if cfg.frames < 1 or cfg.days < 1:
