@@ -22,25 +22,17 @@ from pathlib import Path
 
 import numpy as np
 
+from posenet.boxes import box_iou, coco_to_xyxy
 from posenet.data.support import pose_support
 
 
 def _boxes(ann: dict) -> dict[tuple[int, int], np.ndarray]:
     """(image id, person id) -> xyxy for boxes of people with an id."""
     return {
-        (a["image_id"], a["person_id"]): np.array(
-            [a["bbox"][0], a["bbox"][1], a["bbox"][0] + a["bbox"][2], a["bbox"][1] + a["bbox"][3]]
-        )
+        (a["image_id"], a["person_id"]): coco_to_xyxy(np.array(a["bbox"], np.float64))
         for a in ann["annotations"]
         if a["person_id"] >= 0
     }
-
-
-def _iou(a: np.ndarray, b: np.ndarray) -> float:
-    iw = max(min(a[2], b[2]) - max(a[0], b[0]), 0)
-    ih = max(min(a[3], b[3]) - max(a[1], b[1]), 0)
-    inter = iw * ih
-    return float(inter / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter))
 
 
 def support_histogram(ann: dict) -> Counter:
@@ -60,7 +52,7 @@ def fidelity(twin: dict, real: dict) -> dict:
         if key[0] not in rendered_images:
             continue
         if key in tb and key in rb:
-            per_cam.setdefault(cam_of[key[0]], []).append(_iou(tb[key], rb[key]))
+            per_cam.setdefault(cam_of[key[0]], []).append(float(box_iou(tb[key], rb[key])))
         elif key in rb:
             only_real += 1
         elif key in tb:
@@ -88,10 +80,10 @@ def fidelity(twin: dict, real: dict) -> dict:
         for a in ann["annotations"]:
             key = (a["image_id"], a["person_id"])
             if a["person_role"] == "clinician" and key not in posed_ids and a["image_id"] in rendered_images:
-                x, y, w, h = a["bbox"]
-                only[name].setdefault(a["image_id"], []).append(np.array([x, y, x + w, y + h]))
+                box = coco_to_xyxy(np.array(a["bbox"], np.float64))
+                only[name].setdefault(a["image_id"], []).append(box)
     best = [
-        max((_iou(b, t) for t in only["twin"].get(img, [])), default=0.0)
+        max((float(box_iou(b, t)) for t in only["twin"].get(img, [])), default=0.0)
         for img, boxes in only["mvor"].items()
         for b in boxes
     ]

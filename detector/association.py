@@ -23,8 +23,8 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 from tqdm import tqdm
 
-from detector.boxes import coco_to_xyxy, iou_xyxy
 from detector.matching import Group, match_boxes
+from posenet.boxes import boxes_of_person, coco_to_xyxy, dense_boxes, iou_xyxy, match_persons, person_ids
 
 COUNTS = ("persons", "found", "complete", "missed", "split", "merged", "groups")
 
@@ -44,7 +44,7 @@ def frame_association(
         pred_boxes: per view, ``(K_v, 4)`` boxes that were grouped; groups: the matcher's groups.
     """
     V = len(gt_boxes)
-    persons = sorted({int(i) for ids in gt_ids for i in ids if i >= 0})
+    persons = person_ids(gt_ids)
     # Which group holds each predicted box: owner[v][k].
     owner = [np.full(len(b), -1) for b in pred_boxes]
     for gi, g in enumerate(groups):
@@ -88,19 +88,10 @@ def _paper_score(gt_boxes, gt_ids, pred_boxes, groups, persons) -> float:
     if not persons or not groups:
         return 0.0
     V = len(gt_boxes)
-    score = np.zeros((len(persons), len(groups)))  # (P, G)
-    for v in range(V):
-        pid = {int(i): j for j, i in enumerate(gt_ids[v]) if i >= 0}
-        for pi, p in enumerate(persons):
-            if p not in pid:
-                continue
-            for gi, g in enumerate(groups):
-                if g.indices[v] >= 0:
-                    a = gt_boxes[v][pid[p]][None]
-                    score[pi, gi] += iou_xyxy(a, pred_boxes[v][g.indices[v]][None])[0, 0]
-    score /= V
-    rows, cols = linear_sum_assignment(-score)
-    return float(score[rows, cols].sum())
+    gt = [boxes_of_person(gt_boxes, gt_ids, p) for p in persons]
+    found = [[None if k < 0 else pred_boxes[v][k] for v, k in enumerate(g.indices)] for g in groups]
+    _, _, scores = match_persons(dense_boxes(gt, V), dense_boxes(found, V))
+    return float(scores.sum())
 
 
 def results_by_image(predictions: list[dict], score_threshold: float) -> dict[int, np.ndarray]:

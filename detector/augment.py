@@ -3,7 +3,7 @@ jitter.
 
 DETR from scratch sees few images here (hundreds of views), so the augmentation carries much of the
 generalisation. Everything acts on a view that is already resized to the detector's input width, and on its
-boxes (xyxy pixels, ``detector.boxes``' convention), jointly.
+boxes (xyxy pixels, ``posenet.boxes``' convention), jointly.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from detector.boxes import area_xyxy, clip_xyxy, flip_xyxy, scale_xyxy
+from posenet.boxes import area_xyxy, clip_xyxy, flip_xyxy, scale_xyxy
 
 
 @dataclass

@@ -2,14 +2,12 @@
 
 The detector trains and is evaluated per image (DETR's and COCO's unit), so this reads the COCO part of an
 MVOR-format file (``images`` + ``annotations``) rather than ``posenet.data.mvor``'s multi-view samples, which
-would decode all V views of a frame to use one. Boxes follow ``detector.boxes``: xyxy pixels of the full-size
-image. Days come from each image's ``day_id``, or from its ``dayD/`` folder when that key is missing.
+would decode all V views of a frame to use one. Boxes follow ``posenet.boxes``: xyxy pixels of the full-size
+image. Days come from ``posenet.data.mvor.image_day``.
 """
 
 from __future__ import annotations
 
-import json
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,10 +16,11 @@ import torch
 from torch.utils.data import Dataset
 
 from detector.augment import AugmentConfig, augment_view
-from detector.boxes import coco_to_xyxy, scale_xyxy, xyxy_to_cxcywh_norm
 from detector.inputs import batch_inputs, box_frame, normalise, resize_factor, resize_view
 from detector.model import DetectorConfig
+from posenet.boxes import coco_to_xyxy, scale_xyxy, xyxy_to_cxcywh_norm
 from posenet.data.images import depth_file_name, read_color, read_depth
+from posenet.data.mvor import image_day, read_annotation_json
 
 
 @dataclass
@@ -50,36 +49,13 @@ class ImageRecord:
     root: str | None = None
 
 
-def load_annotation_file(annotations: str | Path | dict) -> dict:
-    """The annotation dict of a path (or the dict itself), with a clear error for a missing or wrong file."""
-    if isinstance(annotations, dict):
-        return annotations
-    path = Path(annotations)
-    if not path.is_file():
-        raise FileNotFoundError(f"annotation file {path} does not exist")
-    with open(path) as f:
-        data = json.load(f)
-    for key in ("images", "annotations"):
-        if key not in data:
-            raise ValueError(f"annotation file {path} has no {key!r} list: not an MVOR/COCO-format file")
-    return data
-
-
-def image_day(image: dict) -> int:
-    """The recording day of an ``images`` entry."""
-    if "day_id" in image:
-        return int(image["day_id"])
-    m = re.search(r"day(\d+)", image["file_name"])
-    if m is None:
-        raise ValueError(
-            f"image {image.get('id')} ({image['file_name']!r}) has no day_id and no dayD/ folder"
-        )
-    return int(m.group(1))
-
-
 def load_records(annotations: str | Path | dict, days: list[int] | None = None) -> list[ImageRecord]:
     """One :class:`ImageRecord` per image of ``days`` (all days when None), sorted by image id."""
-    data = load_annotation_file(annotations)
+    data = annotations if isinstance(annotations, dict) else read_annotation_json(annotations)
+    source = "the annotation dict" if isinstance(annotations, dict) else f"annotation file {annotations}"
+    for key in ("images", "annotations"):
+        if key not in data:
+            raise ValueError(f"{source} has no {key!r} list: not an MVOR/COCO-format file")
     boxes: dict[int, list] = {}
     for ann in data["annotations"]:
         boxes.setdefault(int(ann["image_id"]), []).append(ann["bbox"])

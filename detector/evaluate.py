@@ -19,8 +19,8 @@ import numpy as np
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
 
-from detector.boxes import xyxy_to_coco
 from detector.data import ImageRecord, load_records
+from posenet.boxes import xyxy_to_coco
 
 
 def coco_ground_truth(records: list[ImageRecord]) -> dict:

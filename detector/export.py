@@ -25,12 +25,12 @@ import numpy as np
 import torch
 from torchvision.ops import nms
 
-from detector.boxes import coco_to_xyxy
 from detector.checkpoint import PRECISIONS, load_checkpoint, save_checkpoint
 from detector.data import load_records
 from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
 from detector.predict import predict_records
+from posenet.boxes import coco_to_xyxy
 
 
 def nms_results(results: list[dict], iou: float | None) -> list[dict]:

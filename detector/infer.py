@@ -26,10 +26,10 @@ import numpy as np
 import torch
 from torchvision.ops import nms
 
-from detector.boxes import clip_xyxy, cxcywh_norm_to_xyxy, scale_xyxy
 from detector.checkpoint import load_checkpoint
 from detector.inputs import prepare_views
 from detector.model import DetectorConfig
+from posenet.boxes import clip_xyxy, cxcywh_norm_to_xyxy, scale_xyxy
 from posenet.execution import Precision, resolve_precision
 from posenet.runtime import Backend, OnnxRunner, export_onnx, load_runner
 
@@ -41,7 +41,7 @@ class Detections:
     """The persons found in one view.
 
     Attributes:
-        boxes: (K, 4) float32 xyxy pixels of the view's image (``detector.boxes``' convention).
+        boxes: (K, 4) float32 xyxy pixels of the view's image (``posenet.boxes``' convention).
         scores: (K,) float32 probability of "person", sorted from high to low.
     """
 

@@ -3,7 +3,7 @@
     python -m detector.predict --data DIR --annotations A.json [--checkpoint CKPT] [--days 4] --out BOXES.json
 
 Output: a COCO results list, ``{"image_id", "category_id": 1, "bbox": [x, y, w, h], "score"}`` in full-image
-pixels (``detector.boxes``), which ``detector.evaluate`` scores. Every query
+pixels (``posenet.boxes``), which ``detector.evaluate`` scores. Every query
 above ``--score-threshold`` is kept (a low threshold is what COCO AP expects).
 """
 
@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from detector.boxes import xyxy_to_coco
 from detector.data import ImageRecord, load_records, read_record
 from detector.infer import PersonDetector
+from posenet.boxes import xyxy_to_coco
 
 
 def predict_records(

@@ -28,12 +28,13 @@ from tqdm import tqdm
 
 from detector.augment import AugmentConfig
 from detector.checkpoint import STATE, load_checkpoint, read_config, save_checkpoint
-from detector.data import DetectionDataset, collate, load_annotation_file, load_records, worker_init
+from detector.data import DetectionDataset, collate, load_records, worker_init
 from detector.dense import DenseLoss
 from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
 from detector.model import ARCHS, DetectorConfig, build_detector, param_groups, preset
 from detector.predict import predict_records
+from posenet.data.mvor import read_annotation_json
 
 
 @dataclass
@@ -331,7 +332,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
             if v is not None
         },
     )
-    annotations = load_annotation_file(args.annotations)
+    annotations = read_annotation_json(args.annotations)
     all_days = sorted({r.day for r in load_records(annotations)})
     if args.train_days:
         train_days = args.train_days

@@ -64,6 +64,30 @@ def _type_means(errors: np.ndarray, mask: np.ndarray, types: Iterable[str]) -> d
     return {t: _nanmean(joint_means[list(JOINT_TYPES[t])].tolist()) for t in types}
 
 
+def prediction_record(image_ids: str, person_id: int, joints, confidence=None) -> dict:
+    """One prediction in this module's format, as every producer writes it (``posenet.predict``, the service's
+    pipeline and batch client).
+
+    Args:
+        image_ids: the multi-view frame id; person_id: the ground-truth person id it is matched by.
+        joints: (J, 3) mm, reference frame. confidence: (J,) mm, the pose network's spread per joint (smaller is
+            more certain), or None; an extra key that the evaluator ignores.
+
+    Numbers are rounded to 0.01 mm (far below any error measured here; it keeps the files small).
+    """
+    joints = np.asarray(joints, np.float64)
+    if joints.shape != (NUM_JOINTS, 3):
+        raise ValueError(f"joints must be ({NUM_JOINTS}, 3), got {joints.shape}")
+    record = {
+        "image_ids": str(image_ids),
+        "person_id": int(person_id),
+        "keypoints3D": [round(float(x), 2) for x in joints.reshape(-1)],
+    }
+    if confidence is not None:
+        record["confidence"] = [round(float(x), 2) for x in np.asarray(confidence, np.float64).reshape(-1)]
+    return record
+
+
 def _parse_prediction(pred: dict, index: int) -> tuple[tuple[str, int], np.ndarray]:
     missing = [k for k in ("image_ids", "person_id", "keypoints3D") if k not in pred]
     if missing:

@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 from posenet import augment as aug
+from posenet.boxes import person_ids
 from posenet.cameras import Camera
 
 Tensor = torch.Tensor
@@ -306,7 +307,7 @@ class ScenePersons:
 
 def persons_of_sample(sample, which: str = "annotated") -> ScenePersons:
     """The persons of a ``Sample``: ``"annotated"`` = its 3D poses that have a box in some view (training,
-    validation); ``"boxed"`` = every person id (>= 0) that has a box in some view (prediction)."""
+    validation); ``"boxed"`` = every person of ``posenet.boxes.person_ids`` (prediction)."""
     if any(v.depth is None for v in sample.views):
         raise ValueError(f"sample {sample.id}: every view needs a depth image (load the dataset with depth)")
     views = [(v.color, v.depth, v.camera) for v in sample.views]
@@ -315,7 +316,7 @@ def persons_of_sample(sample, which: str = "annotated") -> ScenePersons:
         ids = [int(i) for i in sample.person_ids]
         poses, valid = sample.poses, sample.valid
     elif which == "boxed":
-        ids = sorted({int(i) for v in sample.views for i in v.box_person_ids if i >= 0})
+        ids = person_ids([v.box_person_ids for v in sample.views])
         index = {int(pid): k for k, pid in enumerate(sample.person_ids)}
         # Persons without a 3D pose (or frames with no identified person at all) get zeros and False.
         poses, valid = np.zeros((len(ids), J, 3), np.float32), np.zeros((len(ids), J), bool)

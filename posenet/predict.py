@@ -21,6 +21,7 @@ import torch
 from tqdm import tqdm
 
 from posenet.checkpoint import load_checkpoint
+from posenet.evaluate import prediction_record
 from posenet.inputs import build_scene, persons_of_sample
 from posenet.model import PoseNet, predict_scenes
 
@@ -48,14 +49,7 @@ def predict_samples(
             for k, pid in enumerate(persons.person_ids.tolist()):
                 if not bool(out.has_points[k]):
                     continue  # no pixel with depth in any of its boxes: nothing to lift
-                preds.append(
-                    {
-                        "image_ids": sample_id,
-                        "person_id": int(pid),
-                        "keypoints3D": [round(float(x), 2) for x in out.joints[k].reshape(-1).tolist()],
-                        "confidence": [round(float(x), 2) for x in out.confidence[k].tolist()],
-                    }
-                )
+                preds.append(prediction_record(sample_id, pid, out.joints[k].cpu(), out.confidence[k].cpu()))
         pending.clear()
 
     for sample in tqdm(samples, desc="predict", disable=not progress, leave=False):

@@ -21,9 +21,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from posenet.boxes import ground_truth_ids, identified
 from posenet.cameras import Camera
 from posenet.data.sample import Sample
-from service.association import ground_truth_ids
+from posenet.evaluate import prediction_record
 
 
 class FrameView(NamedTuple):
@@ -300,22 +301,19 @@ class ScenePipeline:
 
         With ``reference_boxes`` the sample's annotated boxes and person ids are used (the paper's ablation
         setting), so each prediction carries the ground truth's person id. In detector mode each person gets
-        the id of the annotated person whose boxes it overlaps most (``service.association``, the paper's
-        rule); persons that overlap nobody are left out of the predictions.
+        the id of the annotated person whose boxes it overlaps most (the paper's rule,
+        ``posenet.boxes.ground_truth_ids``); persons that overlap nobody are left out of the predictions.
         """
         views = [FrameView(v.color, v.depth, v.camera) for v in sample.views]
         if reference_boxes:
-            keep = [v.box_person_ids >= 0 for v in sample.views]  # boxes without identity have no 3D pose
-            result = self.run(
-                views, [v.boxes[k] for v, k in zip(sample.views, keep, strict=True)],
-                [v.box_person_ids[k] for v, k in zip(sample.views, keep, strict=True)],
-            )  # fmt: skip
+            boxes, ids = zip(*(identified(v.boxes, v.box_person_ids) for v in sample.views), strict=True)
+            result = self.run(views, list(boxes), list(ids))
             ids = [p.id for p in result.persons]
         else:
             result = self.run(views)
             ids = ground_truth_ids(sample, [p.boxes for p in result.persons])
         predictions = [
-            {"image_ids": sample.id, "person_id": pid, "keypoints3D": p.joints.reshape(-1).tolist()}
+            prediction_record(sample.id, pid, p.joints, p.confidence)
             for p, pid in zip(result.persons, ids, strict=True)
             if pid is not None
         ]

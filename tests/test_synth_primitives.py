@@ -144,7 +144,8 @@ def test_box_geometry_matches_the_project_camera_model():
     import torch
 
     from posenet.cameras import Camera
-    from posenet.data.synth.boxes import box_iou, covered, project_boxes
+    from posenet.boxes import box_iou
+    from posenet.data.synth.boxes import covered, project_boxes
     from posenet.data.synth.rig import random_rig
 
     rng = np.random.default_rng(1)

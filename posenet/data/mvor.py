@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from posenet.boxes import coco_to_xyxy
 from posenet.cameras import Camera
 from posenet.data.images import depth_file_name, read_color, read_depth, subsample_color, subsample_depth
 from posenet.data.sample import Sample, View
@@ -46,13 +47,19 @@ REQUIRED_KEYS = ("multiview_images", "annotations", "annotations3D", "cameras_in
 MVOR_DAYS = (1, 2, 3, 4)
 
 
-def load_annotations(path: str | Path) -> dict:
-    """Read and check an MVOR-format annotation json (ValueError naming the file and the missing keys)."""
+def read_annotation_json(path: str | Path) -> dict:
+    """The parsed annotation json at ``path`` (FileNotFoundError naming it when missing), not yet checked:
+    :func:`load_annotations` checks MVOR's schema, ``detector.data`` the per-image part that it reads."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"annotation file {path} does not exist")
     with open(path) as f:
-        gt = json.load(f)
+        return json.load(f)
+
+
+def load_annotations(path: str | Path) -> dict:
+    """Read and check an MVOR-format annotation json (ValueError naming the file and the missing keys)."""
+    gt = read_annotation_json(path)
     check_annotations(gt, str(path))
     return gt
 
@@ -130,7 +137,7 @@ def _box_arrays(boxes: list[dict], image_name: str) -> tuple[np.ndarray, np.ndar
     xywh = np.array([b["bbox"] for b in boxes], np.float64).reshape(-1, 4)  # (K, 4)
     if (xywh[:, 2:] < 0).any():
         raise ValueError(f"image {image_name!r}: a box has a negative width or height")
-    xyxy = np.concatenate([xywh[:, :2], xywh[:, :2] + xywh[:, 2:]], axis=1)
+    xyxy = coco_to_xyxy(xywh)
     ids = np.array([b["person_id"] for b in boxes], np.int64)
     kps = np.zeros((len(boxes), NUM_JOINTS, 3), np.float32)
     for k, b in enumerate(boxes):

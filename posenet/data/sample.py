@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from posenet.boxes import boxes_of_person
 from posenet.cameras import Camera
 
 
@@ -80,8 +81,6 @@ class Sample:
 
     def person_boxes(self, person_id: int) -> list[np.ndarray | None]:
         """Per view, the (4,) box of ``person_id``, or None where that person has no box."""
-        out = []
-        for view in self.views:
-            hits = np.flatnonzero(view.box_person_ids == person_id)
-            out.append(view.boxes[hits[0]] if len(hits) else None)
-        return out
+        return boxes_of_person(
+            [v.boxes for v in self.views], [v.box_person_ids for v in self.views], person_id
+        )

@@ -1,4 +1,5 @@
-"""Image boxes of 3D point sets, and box overlap measures (xyxy pixels, inclusive of the clipped border)."""
+"""Image boxes of 3D point sets, and how much of one box another covers (xyxy pixels, inclusive of the clipped
+border). Their IoU is ``posenet.boxes.box_iou``."""
 
 from __future__ import annotations
 
@@ -19,15 +20,6 @@ def project_boxes(rig: Rig, pts: np.ndarray) -> np.ndarray:
         b = np.stack([u.min(-1), w.min(-1), u.max(-1), w.max(-1)], -1)
         out.append(np.clip(b, 0, [K.width - 1, K.height - 1, K.width - 1, K.height - 1]))
     return np.stack(out)
-
-
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """IoU of xyxy boxes ``a (..., 4)`` and ``b (..., 4)`` (broadcast)."""
-    iw = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0, None)
-    ih = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0, None)
-    inter = iw * ih
-    area = lambda x: (x[..., 2] - x[..., 0]) * (x[..., 3] - x[..., 1])  # noqa: E731
-    return inter / np.maximum(area(a) + area(b) - inter, 1e-9)
 
 
 def covered(a: np.ndarray, b: np.ndarray) -> float:

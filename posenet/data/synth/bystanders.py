@@ -17,8 +17,9 @@ from collections.abc import Callable
 
 import numpy as np
 
+from posenet.boxes import box_iou
 from posenet.data.synth.body import sample_outfit
-from posenet.data.synth.boxes import box_iou, covered, project_boxes
+from posenet.data.synth.boxes import covered, project_boxes
 from posenet.data.synth.poses import build_pose, place, sample_params
 from posenet.data.synth.rig import Rig
 from posenet.data.synth.scene import Frame, Person, silhouettes

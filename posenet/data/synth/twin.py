@@ -22,8 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from posenet.boxes import box_iou
 from posenet.data.synth.body import sample_outfit
-from posenet.data.synth.boxes import box_iou, covered, project_boxes
+from posenet.data.synth.boxes import covered, project_boxes
 from posenet.data.synth.bystanders import add_bystanders
 from posenet.data.synth.looks import Look
 from posenet.data.synth.poses import lying_pose

@@ -1,5 +1,5 @@
-"""Box conversions: round trips, agreement with the camera's resize rule, IoU against a brute-force
-reference."""
+"""``posenet.boxes``: conversions (round trips, agreement with the camera's resize rule), IoU and the mean
+IoU over views against brute-force references, and the rule of which boxes are persons."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from detector import boxes as B
+from posenet import boxes as B
 from posenet.cameras import Camera
 
 
@@ -82,3 +82,48 @@ def test_clip_and_bad_shapes():
         B.coco_to_xyxy(np.zeros((3, 5)))
     with pytest.raises(ValueError, match="iou_xyxy"):
         B.iou_xyxy(np.zeros((2, 4)), np.zeros(4))
+
+
+def test_broadcast_iou_equals_the_pairwise_one(xyxy):
+    a, b = xyxy[:7], xyxy[7:12]
+    np.testing.assert_array_equal(B.box_iou(a[:, None], b[None]), B.iou_xyxy(a, b))
+    np.testing.assert_allclose(B.box_iou(a, a), 1.0)
+    line = np.array([3.0, 3, 3, 9])  # area 0 (a projected box clipped to the image border)
+    assert B.box_iou(line, line) == 0.0 and B.box_iou(line, a[0]) == 0.0
+
+
+def test_mean_view_iou_against_brute_force(xyxy):
+    rng = np.random.default_rng(1)
+    P, G, V = 4, 3, 3
+    pred, gt = xyxy[: P * V].reshape(P, V, 4).copy(), xyxy[20 : 20 + G * V].reshape(G, V, 4).copy()
+    gt[:2] = pred[:2] + rng.normal(0, 5, (2, V, 4))  # two persons overlap their detection
+    pred[0, 1] = np.nan  # missed in one view
+    gt[2, 0] = np.nan  # not in view 0
+    got = B.mean_view_iou(pred, gt)
+    for p in range(P):
+        for g in range(G):
+            ious = [
+                0.0
+                if np.isnan(pred[p, v, 0]) or np.isnan(gt[g, v, 0])
+                else B.iou_xyxy(pred[p, v][None], gt[g, v][None])[0, 0]
+                for v in range(V)
+            ]
+            assert got[p, g] == pytest.approx(np.mean(ious))
+    rows, cols, scores = B.match_persons(pred, gt)
+    assert len(rows) == G and set(rows[cols < 2]) == {0, 1} and list(cols[rows < 2]) == [0, 1]
+    np.testing.assert_allclose(scores, got[rows, cols])
+
+
+def test_persons_are_the_boxes_with_an_identity():
+    boxes = [np.arange(12.0).reshape(3, 4), np.arange(8.0).reshape(2, 4) + 100, np.zeros((0, 4))]
+    ids = [np.array([-1, 3, 1]), np.array([1, -1]), np.zeros(0, np.int64)]
+    assert B.person_ids(ids) == [1, 3]
+    kept, kept_ids = B.identified(boxes[0], ids[0])
+    np.testing.assert_array_equal(kept, boxes[0][1:])
+    assert kept_ids.tolist() == [3, 1]
+    one = B.boxes_of_person(boxes, ids, 1)
+    np.testing.assert_array_equal(one[0], boxes[0][2])
+    np.testing.assert_array_equal(one[1], boxes[1][0])
+    assert one[2] is None and B.boxes_of_person(boxes, ids, 7) == [None, None, None]
+    dense = B.dense_boxes([one], 3)
+    assert dense.shape == (1, 3, 4) and np.isnan(dense[0, 2]).all() and not np.isnan(dense[0, :2]).any()

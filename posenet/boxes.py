@@ -1,0 +1,255 @@
+"""Person boxes: their formats, their overlap, and the persons they belong to.
+
+Every box in this project is ``xyxy`` in pixels of its image, in ``posenet.cameras``' pixel convention: the
+origin is the *centre* of the top-left pixel, so an image of width W spans ``[-0.5, W - 0.5]``. The other
+formats:
+
+- **COCO** ``[x, y, w, h]`` (MVOR's annotations and COCO results files): ``x0 = x``, ``x1 = x + w``. MVOR's
+  pixel numbers are already in the camera convention (its 2D keypoints agree with its own projections there),
+  so there is no half-pixel shift: the same rule as ``posenet.data.mvor``.
+- **DETR** ``(cx, cy, w, h)`` normalised by the image size, with the image spanning ``[0, 1]``: ``cx = (xc +
+  0.5) / W``.
+
+Resizing an image by a factor ``f`` maps a coordinate u to ``(u + 0.5) f - 0.5`` (as ``Camera.scale``), a
+horizontal flip maps it to ``W - 1 - u``. The conversions take ``(..., 4)`` arrays or tensors and keep their
+type (numpy in, numpy out; torch in, torch out), because they are pure arithmetic; the overlap measures and the
+person rules are numpy (evaluation and matching, never in a gradient).
+
+**Persons.** A box whose person id is ``>= 0`` belongs to that person; ``NO_IDENTITY`` (-1) marks a box without
+an identity (MVOR annotates some boxes without a 3D pose or a name), which is never a person to estimate.
+A person across V views is a list of V entries, each a box or None, or densely ``(P, V, 4)`` with NaN where
+the person has no box.
+
+**The paper's identity rule** (Sec. "Bounding boxes from DETR"): a detected person is the annotated person whose
+boxes it overlaps most, by IoU averaged over the V views (a view where either has no box scores 0), matched one
+to one by the assignment that maximises the total (Hungarian).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+from scipy.optimize import linear_sum_assignment
+
+NO_IDENTITY = -1  # the person id of a box that belongs to nobody known
+
+ArrayLike = np.ndarray | torch.Tensor
+
+
+def _check(name: str, boxes: ArrayLike) -> None:
+    if boxes.ndim < 1 or boxes.shape[-1] != 4:
+        raise ValueError(f"{name} must have shape (..., 4), got {tuple(boxes.shape)}")
+
+
+def _stack(parts: list, like: ArrayLike) -> ArrayLike:
+    if isinstance(like, torch.Tensor):
+        return torch.stack(parts, dim=-1)
+    return np.stack(parts, axis=-1)
+
+
+def coco_to_xyxy(boxes: ArrayLike) -> ArrayLike:
+    """COCO ``[x, y, w, h]`` ``(..., 4)`` to xyxy pixels."""
+    _check("boxes", boxes)
+    x, y, w, h = (boxes[..., i] for i in range(4))
+    return _stack([x, y, x + w, y + h], boxes)
+
+
+def xyxy_to_coco(boxes: ArrayLike) -> ArrayLike:
+    """xyxy pixels ``(..., 4)`` to COCO ``[x, y, w, h]``."""
+    _check("boxes", boxes)
+    x0, y0, x1, y1 = (boxes[..., i] for i in range(4))
+    return _stack([x0, y0, x1 - x0, y1 - y0], boxes)
+
+
+def xyxy_to_cxcywh_norm(boxes: ArrayLike, width: int, height: int) -> ArrayLike:
+    """xyxy pixels ``(..., 4)`` to DETR's normalised ``(cx, cy, w, h)`` for an image of ``width x height``."""
+    _check("boxes", boxes)
+    x0, y0, x1, y1 = (boxes[..., i] for i in range(4))
+    return _stack(
+        [
+            ((x0 + x1) / 2 + 0.5) / width,
+            ((y0 + y1) / 2 + 0.5) / height,
+            (x1 - x0) / width,
+            (y1 - y0) / height,
+        ],
+        boxes,
+    )
+
+
+def cxcywh_norm_to_xyxy(boxes: ArrayLike, width: int, height: int) -> ArrayLike:
+    """DETR's normalised ``(cx, cy, w, h)`` ``(..., 4)`` to xyxy pixels of a ``width x height`` image."""
+    _check("boxes", boxes)
+    cx, cy, w, h = (boxes[..., i] for i in range(4))
+    cx, cy, w, h = cx * width - 0.5, cy * height - 0.5, w * width, h * height
+    return _stack([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], boxes)
+
+
+def scale_xyxy(boxes: ArrayLike, factor: float) -> ArrayLike:
+    """Boxes ``(..., 4)`` of an image resized by ``factor`` (0.5 halves it)."""
+    _check("boxes", boxes)
+    return (boxes + 0.5) * factor - 0.5
+
+
+def flip_xyxy(boxes: ArrayLike, width: int) -> ArrayLike:
+    """Boxes ``(..., 4)`` of the horizontally flipped image of ``width`` pixels."""
+    _check("boxes", boxes)
+    x0, y0, x1, y1 = (boxes[..., i] for i in range(4))
+    return _stack([width - 1 - x1, y0, width - 1 - x0, y1], boxes)
+
+
+def clip_xyxy(boxes: ArrayLike, width: int, height: int) -> ArrayLike:
+    """Boxes ``(..., 4)`` clipped to the image ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``."""
+    _check("boxes", boxes)
+    x0, y0, x1, y1 = (boxes[..., i] for i in range(4))
+    if isinstance(boxes, torch.Tensor):
+        clamp = torch.clamp
+    else:
+        clamp = np.clip
+    return _stack(
+        [
+            clamp(x0, -0.5, width - 0.5),
+            clamp(y0, -0.5, height - 0.5),
+            clamp(x1, -0.5, width - 0.5),
+            clamp(y1, -0.5, height - 0.5),
+        ],
+        boxes,
+    )
+
+
+def area_xyxy(boxes: ArrayLike) -> ArrayLike:
+    """Areas ``(...)`` of boxes ``(..., 4)``; inverted boxes have area 0."""
+    _check("boxes", boxes)
+    w = boxes[..., 2] - boxes[..., 0]
+    h = boxes[..., 3] - boxes[..., 1]
+    if isinstance(boxes, torch.Tensor):
+        return w.clamp_min(0) * h.clamp_min(0)
+    return np.maximum(w, 0) * np.maximum(h, 0)
+
+
+def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """IoU of xyxy boxes ``a (..., 4)`` and ``b (..., 4)``, broadcast against each other (numpy float64).
+
+    Inverted boxes have area 0; two boxes of area 0 have IoU 0."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    _check("a", a)
+    _check("b", b)
+    lo = np.maximum(a[..., :2], b[..., :2])
+    hi = np.minimum(a[..., 2:], b[..., 2:])
+    inter = np.prod(np.clip(hi - lo, 0, None), axis=-1)
+    union = area_xyxy(a) + area_xyxy(b) - inter
+    return np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)
+
+
+def iou_xyxy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pairwise IoU ``(N, M)`` between boxes ``a (N, 4)`` and ``b (M, 4)`` (numpy, xyxy)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    if a.ndim != 2 or b.ndim != 2 or a.shape[1] != 4 or b.shape[1] != 4:
+        raise ValueError(f"iou_xyxy needs (N, 4) and (M, 4) boxes, got {a.shape} and {b.shape}")
+    return box_iou(a[:, None, :], b[None, :, :])
+
+
+# ----------------------------------------------------------------------------------------------- persons
+def identified(boxes: np.ndarray, person_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The boxes ``(K', 4)`` of one view that belong to a person, and their ids ``(K',)`` (ids >= 0)."""
+    keep = np.asarray(person_ids) >= 0
+    return np.asarray(boxes)[keep], np.asarray(person_ids)[keep]
+
+
+def person_ids(ids_per_view: Sequence[np.ndarray]) -> list[int]:
+    """The persons of a frame, sorted: every id >= 0 that has a box in some view (``ids_per_view``: V arrays)."""
+    return sorted({int(i) for ids in ids_per_view for i in np.asarray(ids).reshape(-1) if i >= 0})
+
+
+def boxes_of_person(
+    boxes_per_view: Sequence[np.ndarray], ids_per_view: Sequence[np.ndarray], person_id: int
+) -> list[np.ndarray | None]:
+    """Per view, the (4,) box of ``person_id`` (its first, should a view hold two), or None where it has none."""
+    out = []
+    for boxes, ids in zip(boxes_per_view, ids_per_view, strict=True):
+        hits = np.flatnonzero(np.asarray(ids) == person_id)
+        out.append(boxes[hits[0]] if len(hits) else None)
+    return out
+
+
+def dense_boxes(persons: Sequence[Sequence[Sequence[float] | None]], num_views: int) -> np.ndarray:
+    """P persons of ``num_views`` entries (a box or None) as ``(P, V, 4)`` float64, NaN where there is no box."""
+    out = np.full((len(persons), num_views, 4), np.nan)
+    for p, views in enumerate(persons):
+        if len(views) != num_views:
+            raise ValueError(f"person {p} has {len(views)} box entries, expected {num_views} (one per view)")
+        for v, box in enumerate(views):
+            if box is not None:
+                out[p, v] = np.asarray(box, np.float64).reshape(4)
+    return out
+
+
+# ----------------------------------------------------------------------------------------------- identity
+def mean_view_iou(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Mean IoU over views between predicted and ground-truth persons.
+
+    Args:
+        pred: (P, V, 4) boxes of each predicted person per view, NaN where it has no box.
+        gt: (G, V, 4) the same for the ground-truth persons.
+
+    Returns:
+        (P, G) the IoU averaged over the V views, a view where either has no box counting 0.
+    """
+    if pred.ndim != 3 or gt.ndim != 3 or pred.shape[1:] != gt.shape[1:] or pred.shape[2] != 4:
+        raise ValueError(f"pred and gt must be (P, V, 4) and (G, V, 4), got {pred.shape} and {gt.shape}")
+    ious = box_iou(np.nan_to_num(pred)[:, None], np.nan_to_num(gt)[None])  # (P, G, V)
+    present = ~np.isnan(pred[:, None, :, 0]) & ~np.isnan(gt[None, :, :, 0])  # (P, G, V)
+    return np.where(present, ious, 0.0).mean(axis=-1)
+
+
+def match_persons(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The one-to-one matching of predicted to ground-truth persons that maximises the total mean-view IoU.
+
+    Args:
+        pred: (P, V, 4), gt: (G, V, 4) boxes, NaN where a person has no box (see :func:`mean_view_iou`).
+
+    Returns:
+        rows (M,) indices into ``pred``, cols (M,) into ``gt``, and their mean-view IoUs (M,);
+        M = min(P, G).
+    """
+    score = mean_view_iou(pred, gt)  # (P, G)
+    rows, cols = linear_sum_assignment(score, maximize=True)
+    return rows, cols, score[rows, cols]
+
+
+def assign(
+    pred_boxes: Sequence[Sequence[Sequence[float] | None]],
+    gt_boxes: Sequence[Sequence[Sequence[float] | None]],
+    min_iou: float = 0.1,
+) -> list[int | None]:
+    """For each predicted person, the index of its ground-truth person (or None).
+
+    Args:
+        pred_boxes: P persons, each V entries: an xyxy box or None.
+        gt_boxes: G persons, each V entries: an xyxy box or None.
+        min_iou: the least mean IoU for a pair to count as the same person.
+    """
+    out: list[int | None] = [None] * len(pred_boxes)
+    if not pred_boxes or not gt_boxes:
+        return out
+    V = len(gt_boxes[0])
+    rows, cols, scores = match_persons(dense_boxes(pred_boxes, V), dense_boxes(gt_boxes, V))
+    for r, c, s in zip(rows, cols, scores, strict=True):
+        if s > min_iou:
+            out[r] = int(c)
+    return out
+
+
+def ground_truth_ids(sample, pred_boxes: Sequence[Sequence[Sequence[float] | None]]) -> list[int | None]:
+    """The ground-truth person id of each predicted person of ``sample`` (None where none overlaps enough).
+
+    Args:
+        sample: the annotated frame (a ``posenet.data.sample.Sample``); its persons are :func:`person_ids`.
+        pred_boxes: P persons, each V entries: an xyxy box or None.
+    """
+    boxes = [v.boxes for v in sample.views]
+    ids = [v.box_person_ids for v in sample.views]
+    gt_ids = person_ids(ids)
+    matches = assign(pred_boxes, [boxes_of_person(boxes, ids, pid) for pid in gt_ids])
+    return [None if g is None else gt_ids[g] for g in matches]
