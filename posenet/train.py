@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import os
 import sys
 import time
@@ -42,6 +41,7 @@ from posenet.execution import PRECISIONS
 from posenet.inputs import InputConfig, build_scene, persons_of_sample
 from posenet.loss import mpjpe, reprojection_2d
 from posenet.model import ModelConfig, PoseNet
+from posenet.schedule import Schedule, lr_factor  # noqa: F401  (lr_factor: posenet.train's public name)
 
 
 @dataclass
@@ -161,15 +161,23 @@ class CachedFrames(torch.utils.data.Dataset):
         return self.cache[i]
 
 
-def trainable_frames(annotations: dict, subsample: int, days) -> list[int]:
-    """Indices of frames with at least one 3D pose that has a box (read from the annotations, no images)."""
+def trainable_frames(annotations: dict, subsample: int, days, which: str = "annotated") -> list[int]:
+    """Indices of the frames with someone to train on, read from the annotations (no images): ``"annotated"``,
+    a 3D pose that has a box; ``"boxed"``, a person id (>= 0) with a box (never reads 3D poses)."""
     from posenet.data.mvor import MvorDataset
 
-    meta = MvorDataset(None, annotations, subsample=subsample, modalities=(), days=days)
+    if which not in ("annotated", "boxed"):
+        raise ValueError(f"which must be 'annotated' or 'boxed', got {which!r}")
+    poses = which == "annotated"
+    meta = MvorDataset(None, annotations, subsample=subsample, modalities=(), days=days, poses=poses)
     keep = []
     for i in range(len(meta)):
         s = meta[i]
-        if any(any(b is not None for b in s.person_boxes(int(p))) for p in s.person_ids):
+        if poses:
+            found = any(any(b is not None for b in s.person_boxes(int(p))) for p in s.person_ids)
+        else:
+            found = any((v.box_person_ids >= 0).any() for v in s.views)
+        if found:
             keep.append(i)
     return keep
 
@@ -180,17 +188,6 @@ def setup_distributed(device: str) -> tuple[int, int]:
     if world > 1 and not dist.is_initialized():
         dist.init_process_group("nccl" if device.startswith("cuda") else "gloo")
     return (dist.get_rank(), dist.get_world_size()) if dist.is_initialized() else (0, 1)
-
-
-def lr_factor(step: float, total: float, decay_start: float, warmup: float = 0.0) -> float:
-    """A linear warm-up from 0.1 over the first ``warmup`` of the training, 1 until ``decay_start`` of it, then a
-    cosine down to 0 at the end. ``step`` / ``total`` are steps, or seconds of a time budget."""
-    if warmup > 0 and step < warmup * total:
-        return 0.1 + 0.9 * step / (warmup * total)
-    start = decay_start * total
-    if step < start or total <= start:
-        return 1.0
-    return 0.5 * (1 + math.cos(math.pi * min(1.0, (step - start) / (total - start))))
 
 
 def scene_loss(model_config: ModelConfig, out, persons, cameras) -> torch.Tensor:
@@ -285,19 +282,9 @@ def train(cfg: TrainConfig) -> dict:
     if rank == 0:
         print(f"precision: {precision.name}: {precision.reason}", file=sys.stderr)
     optimiser = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    budget_s = None if cfg.minutes is None else 60.0 * cfg.minutes
-    if cfg.clock not in ("wall", "cpu"):
-        raise ValueError(f"clock must be 'wall' or 'cpu', got {cfg.clock!r}")
-    clock = time.perf_counter if cfg.clock == "wall" else time.process_time
-    total_steps = cfg.epochs * len(loader)
-    step, elapsed = 0, 0.0  # optimiser steps and seconds of training (validation excluded) so far
-
-    def set_lr() -> float:
-        done, total = (elapsed, budget_s) if budget_s is not None else (step, total_steps)
-        lr = cfg.lr * lr_factor(done, total, cfg.decay_start, cfg.warmup)
-        for group in optimiser.param_groups:
-            group["lr"] = lr
-        return lr
+    # optimiser steps and seconds of training (validation excluded) so far, and the LR they give
+    schedule = Schedule(cfg.lr, cfg.epochs * len(loader), cfg.decay_start, cfg.warmup, cfg.minutes, cfg.clock)
+    budget_s = schedule.budget_s
 
     start_epoch, best = 0, float("inf")
     state_file = out / "last" / "train_state.pt"
@@ -309,8 +296,8 @@ def train(cfg: TrainConfig) -> dict:
         optimiser.load_state_dict(state["optimiser"])
         start_epoch, best = state["epoch"], state["best"]
         # (runs from before the time budget saved a LambdaLR, whose last_epoch is the step count)
-        step = state.get("step", state.get("scheduler", {}).get("last_epoch", 0))
-        elapsed = state.get("elapsed_s", 0.0)
+        schedule.step = state.get("step", state.get("scheduler", {}).get("last_epoch", 0))
+        schedule.elapsed = state.get("elapsed_s", 0.0)
         if rank == 0:
             print(f"resuming {out} at epoch {start_epoch} (best {best:.2f} cm)", file=sys.stderr)
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
@@ -320,10 +307,10 @@ def train(cfg: TrainConfig) -> dict:
         (out / "config.json").write_text(json.dumps(config_dict, indent=2, default=str))
 
     history = []
-    last_val_minute = elapsed / 60.0
+    last_val_minute = schedule.elapsed / 60.0
     epochs = cfg.epochs if budget_s is None else 10**9  # with a budget, as many epochs as the time allows
     for epoch in range(start_epoch, epochs):
-        if budget_s is not None and elapsed >= budget_s:
+        if schedule.spent:
             break
         model.train()
         sampler.set_epoch(epoch)
@@ -338,8 +325,7 @@ def train(cfg: TrainConfig) -> dict:
             persons = [p for p in persons if p.person_ids.numel()]
             if not persons:
                 continue
-            t_step = clock()
-            lr = set_lr()
+            lr = schedule.begin(optimiser)
             scenes = [
                 build_scene(p.views, p.boxes, p.has_box, cfg.model.inputs, cfg.augment, gen) for p in persons
             ]
@@ -351,14 +337,13 @@ def train(cfg: TrainConfig) -> dict:
             optimiser.zero_grad(set_to_none=True)
             loss.backward()
             optimiser.step()
-            step += 1
-            elapsed += clock() - t_step
+            schedule.end()
             seen += len(persons)
             crops += sum(int(sc.has_box.sum()) for sc in scenes)  # person-view crops run
             value = float(loss.detach())
             running = value if running is None else 0.95 * running + 0.05 * value
-            bar.set_postfix(loss=f"{running:.1f}", lr=f"{lr:.1e}", min=f"{elapsed / 60:.1f}")
-            if budget_s is not None and elapsed >= budget_s:
+            bar.set_postfix(loss=f"{running:.1f}", lr=f"{lr:.1e}", min=f"{schedule.elapsed / 60:.1f}")
+            if schedule.spent:
                 break
         record = {
             "epoch": epoch + 1,
@@ -366,19 +351,19 @@ def train(cfg: TrainConfig) -> dict:
             "scenes": seen,
             "crops": crops,
             "seconds": round(time.time() - t0, 1),
-            "minutes": round(elapsed / 60.0, 2),
-            "steps": step,
+            "minutes": round(schedule.elapsed / 60.0, 2),
+            "steps": schedule.step,
             "lr": lr if seen else None,
         }
         if budget_s is None:
             last = epoch + 1 == cfg.epochs
             due = (epoch + 1) % cfg.val_every == 0
         else:
-            last = elapsed >= budget_s
+            last = schedule.spent
             every = cfg.val_every_minutes or cfg.minutes / 6
-            due = elapsed / 60.0 - last_val_minute >= every
+            due = schedule.elapsed / 60.0 - last_val_minute >= every
         if rank == 0 and val_set is not None and (due or last):
-            last_val_minute = elapsed / 60.0
+            last_val_minute = schedule.elapsed / 60.0
             metrics = validate(model, annotations, val_set, [cfg.holdout_day])
             record.update({k: v for k, v in metrics.items() if k != "result"})
         if rank == 0:
@@ -389,8 +374,8 @@ def train(cfg: TrainConfig) -> dict:
                 "epoch": epoch + 1,
                 "best": best,
                 "optimiser": optimiser.state_dict(),
-                "step": step,
-                "elapsed_s": elapsed,
+                "step": schedule.step,
+                "elapsed_s": schedule.elapsed,
             }
             save_checkpoint(out / "last", model, config_dict, train_state)
             if improved or (val_set is None and last):
@@ -516,31 +501,30 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+def run_config(args: argparse.Namespace, from_dict, resume_keys: tuple[str, ...], fresh):
+    """The config of the run in ``args.out``: with ``--resume`` the saved ``config.json`` (``from_dict``), with the
+    options of ``resume_keys`` that were given applied; else ``fresh()``, refusing to overwrite a run."""
     out = Path(args.out)
     if args.resume:
         saved = out / "config.json"
         if not saved.is_file():
             raise FileNotFoundError(f"--resume: {saved} does not exist; start the run without --resume")
-        cfg = TrainConfig.from_dict(json.loads(saved.read_text()))
-        for key in (
-            "epochs",
-            "minutes",
-            "val_every",
-            "val_every_minutes",
-            "threads",
-            "num_workers",
-            "device",
-        ):
+        cfg = from_dict(json.loads(saved.read_text()))
+        for key in resume_keys:
             if getattr(args, key, None) is not None:
                 setattr(cfg, key, getattr(args, key))
-    else:
-        if (out / "last").exists():
-            raise FileExistsError(
-                f"{out} already holds a run; pass --resume to continue it or choose another --out"
-            )
-        cfg = resolve_config(args)
+        return cfg
+    if (out / "last").exists():
+        raise FileExistsError(
+            f"{out} already holds a run; pass --resume to continue it or choose another --out"
+        )
+    return fresh()
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    resume_keys = ("epochs", "minutes", "val_every", "val_every_minutes", "threads", "num_workers", "device")
+    cfg = run_config(args, TrainConfig.from_dict, resume_keys, lambda: resolve_config(args))
     result = train(cfg)
     if result["history"] and result["rank"] == 0:
         print(json.dumps({"best_val_mpjpe_cm": result["best_val_mpjpe_cm"]}))
