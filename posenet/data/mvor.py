@@ -57,18 +57,23 @@ def read_annotation_json(path: str | Path) -> dict:
         return json.load(f)
 
 
-def load_annotations(path: str | Path) -> dict:
-    """Read and check an MVOR-format annotation json (ValueError naming the file and the missing keys)."""
+def load_annotations(path: str | Path, poses: bool = True) -> dict:
+    """Read and check an MVOR-format annotation json (ValueError naming the file and the missing keys).
+
+    ``poses=False`` drops ``annotations3D`` as soon as the file is parsed, and does not require it: for
+    unlabelled recordings, and for the users that must never see 3D poses (``posenet.adapt``)."""
     gt = read_annotation_json(path)
-    check_annotations(gt, str(path))
+    if not poses and isinstance(gt, dict):
+        gt.pop("annotations3D", None)
+    check_annotations(gt, str(path), poses)
     return gt
 
 
-def check_annotations(gt: dict, source: str = "annotations") -> None:
-    """Raise ValueError when ``gt`` lacks a key of MVOR's schema."""
+def check_annotations(gt: dict, source: str = "annotations", poses: bool = True) -> None:
+    """Raise ValueError when ``gt`` lacks a key of MVOR's schema (``annotations3D`` only with ``poses``)."""
     if not isinstance(gt, dict):
         raise ValueError(f"{source}: expected a JSON object, got {type(gt).__name__}")
-    missing = [k for k in REQUIRED_KEYS if k not in gt]
+    missing = [k for k in REQUIRED_KEYS if k not in gt and (poses or k != "annotations3D")]
     if missing:
         raise ValueError(f"{source}: not an MVOR-format annotation file, missing keys {missing}")
 
@@ -189,6 +194,9 @@ class MvorDataset(torch.utils.data.Dataset):
             are scaled to match).
         modalities: which images to load, a subset of ``("color", "depth")``; ``()`` reads annotations only.
         days: the recording days to keep (None keeps all).
+        poses: False never reads ``annotations3D`` (a loaded dict must not hold them; a path is loaded without
+            them): every sample then has no 3D pose. For recordings without 3D poses, and for ``posenet.adapt``,
+            which must never see them.
     """
 
     def __init__(
@@ -198,12 +206,19 @@ class MvorDataset(torch.utils.data.Dataset):
         subsample: int = 1,
         modalities: Sequence[str] = MODALITIES,
         days: Iterable[int] | None = None,
+        poses: bool = True,
     ) -> None:
         if isinstance(annotations, dict):
-            check_annotations(annotations)
+            check_annotations(annotations, poses=poses)
+            if not poses and "annotations3D" in annotations:
+                raise ValueError(
+                    "poses=False, but the annotation dict holds annotations3D: load it with "
+                    "load_annotations(path, poses=False)"
+                )
             self.annotations = annotations
         else:
-            self.annotations = load_annotations(annotations)
+            self.annotations = load_annotations(annotations, poses)
+        self.poses = poses
         self.subsample, modalities = check_reader_options(subsample, modalities)
         self.modalities = modalities if root is not None else ()
         self.root = None if root is None else Path(root)
@@ -228,9 +243,10 @@ class MvorDataset(torch.utils.data.Dataset):
         for box in gt["annotations"]:
             boxes_by_image[box["image_id"]].append(box)
         poses_by_frame = defaultdict(list)
-        support = pose_support(gt, boxes_per_person(gt["annotations"]))
-        for i, pose in enumerate(gt["annotations3D"]):
-            poses_by_frame[pose["image_ids"]].append((i, pose, support[i]))
+        if self.poses:
+            support = pose_support(gt, boxes_per_person(gt["annotations"]))
+            for i, pose in enumerate(gt["annotations3D"]):
+                poses_by_frame[pose["image_ids"]].append((i, pose, support[i]))
 
         frames = []
         n_cams = len(self.cameras)
