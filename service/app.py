@@ -16,12 +16,14 @@ from fastapi import FastAPI, Request
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
 
+from posenet.track import Tracker, TrackerConfig
 from service.errors import InputError
 from service.limits import BodyLimitMiddleware, InFlightLimiter
 from service.pipeline import PipelineConfig, ScenePipeline
 from service.routes import docs_router, protected, public
 from service.schemas import SceneIn
 from service.settings import Settings
+from service.streams import StreamRegistry
 
 
 @asynccontextmanager
@@ -82,6 +84,10 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
     app.state.settings = settings
     app.state.pipeline = pipeline
     app.state.in_flight = InFlightLimiter(settings.max_in_flight)
+    tracker = TrackerConfig(max_spread_mm=settings.track_max_spread_mm)
+    app.state.streams = StreamRegistry(
+        settings.max_streams, settings.stream_idle_s, lambda: Tracker(tracker), settings.retry_after_s
+    )
     app.add_middleware(
         BodyLimitMiddleware,
         max_bytes=settings.max_body_bytes,

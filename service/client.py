@@ -3,6 +3,8 @@
     python -m service.client DATASET_DIR --annotations A.json --url http://localhost:8000
         --out results.jsonl [--concurrency 4] [--reference-boxes] [--days 4] [--evaluate] [--token T]
     python -m service.client RECORDING_DIR --url http://localhost:8000 --out results.jsonl   # rig.json + cam*/
+    python -m service.client SEQUENCES_DIR --annotations A.json --out tracks.jsonl --track \
+        [--export-easymocap DIR] [--export-csv tracks.csv]      # posenet.data.synth --sequence output
 
 Each finished frame is appended to ``--out`` as one line, flushed and fsynced, so a killed run loses at most
 the frames in flight. A restarted run skips the frames already in the file (a line cut short by the kill is
@@ -15,20 +17,31 @@ Image files are sent as they are on disk (no decoding or re-encoding): ``dayD/ca
 sent with those ids (the paper's reference-box setting, detection skipped). ``--evaluate`` scores the whole
 output file with ``posenet.evaluate``; in detector mode each returned person is first given the ground-truth
 id whose boxes it overlaps most (mean IoU over the views, as in the paper).
+
+``--track`` sends each sequence's frames (the ``sequence``, ``frame_index`` and ``timestamp_s`` of each
+multi-view frame) in time order through one stream per sequence (``POST /streams/{id}/frames``; up to
+``--concurrency`` sequences at once); each line also holds ``sequence``, ``frame_index`` and ``timestamp_s``,
+and each person its ``track_id`` and ``smoothed_joints``. A resumed run sends a partly done sequence again
+from its first frame, so that its track ids go on as before (see :func:`track_sequence`). The exports
+(``service.track_export``) are written from the whole output file at the end.
 """
 
 from __future__ import annotations
 
 import argparse
 import fcntl
+import hashlib
 import json
 import os
 import random
+import socket
 import sys
+import threading
 import time
-from concurrent.futures import ThreadPoolExecutor, as_completed
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import httpx
 from tqdm import tqdm
@@ -87,19 +100,31 @@ def _backoff(cfg: ClientConfig, attempt: int, retry_after: str | None) -> float:
     return delay
 
 
-def post_frame(client: httpx.Client, sample: Sample, root: Path, cfg: ClientConfig) -> dict:
-    """Post one frame, retrying transient failures. Returns the output line's dict.
+def _headers(cfg: ClientConfig) -> dict[str, str]:
+    return {"Authorization": f"Bearer {cfg.token}"} if cfg.token else {}
+
+
+def post_frame(
+    client: httpx.Client,
+    sample: Sample,
+    root: Path,
+    cfg: ClientConfig,
+    path: str = "/scenes",
+    fields: dict[str, str] | None = None,
+) -> dict:
+    """Post one frame to ``path`` (with the extra form ``fields``), retrying transient failures. Returns the
+    output line's dict.
 
     Raises the last transient error when the retries are used up (the frame is then not written).
     """
     scene, files = scene_request(sample, root, cfg.reference_boxes)
-    headers = {"Authorization": f"Bearer {cfg.token}"} if cfg.token else {}
+    headers = _headers(cfg)
     for attempt in range(cfg.retries + 1):
         t0 = time.perf_counter()
         try:
             r = client.post(
-                "/scenes",
-                data={"scene": json.dumps(scene)},
+                path,
+                data={"scene": json.dumps(scene), **(fields or {})},
                 files=files,
                 headers=headers,
                 timeout=cfg.timeout_s,
@@ -204,8 +229,42 @@ def lock_output(f, path: Path) -> None:
         ) from None
 
 
-def run(dataset: MvorDataset, root: Path, out: Path, cfg: ClientConfig) -> dict:
-    """Post every frame not yet in ``out``; returns the counts of the run."""
+class Output:
+    """The output file of a run, written from the worker threads: each line appended, counted and shown."""
+
+    def __init__(self, f, counts: dict, bar: tqdm) -> None:
+        self.f, self.counts, self.bar = f, counts, bar
+        self.lock = threading.Lock()
+
+    def write(self, line: dict) -> None:
+        with self.lock:
+            append_line(self.f, line)
+            self.counts["ok" if line["status"] == 200 else "rejected"] += 1
+            if line["status"] != 200:
+                tqdm.write(f"{line['id']}: {line['status']} {line.get('error')}")
+            self.bar.update()
+
+    def gave_up(self, what: str, exc: Exception, frames: int = 1) -> None:
+        # Transient errors after all retries, or an unreadable image file: not written, so a rerun (after
+        # fixing the file) retries the frames.
+        with self.lock:
+            self.counts["gave_up"] += frames
+            tqdm.write(f"{what}: gave up ({exc}); a rerun will retry it")
+            self.bar.update(frames)
+
+
+def run(
+    dataset: MvorDataset,
+    root: Path,
+    out: Path,
+    cfg: ClientConfig,
+    sequences: dict[int, list[SequenceFrame]] | None = None,
+) -> dict:
+    """Post every frame not yet in ``out``; returns the counts of the run.
+
+    ``sequences`` (:func:`sequence_frames`): send each sequence's frames in order through a stream
+    (:func:`track_sequence`), up to ``cfg.concurrency`` sequences at once; None: frames one by one to /scenes.
+    """
     f = open(out, "a")  # closed by the with block below; the lock lasts as long
     lock_output(f, out)
     done = read_done(out)  # only once the lock is held: it may truncate a torn last line
@@ -225,23 +284,142 @@ def run(dataset: MvorDataset, root: Path, out: Path, cfg: ClientConfig) -> dict:
         f,
         tqdm(total=len(todo), desc="frames", unit="frame", dynamic_ncols=True) as bar,
     ):
-        futures = {pool.submit(post_frame, client, dataset[i], root, cfg): dataset.ids[i] for i in todo}
-        for future in as_completed(futures):
-            try:
-                line = future.result()
-            except (httpx.TransportError, RuntimeError, OSError) as exc:
-                # Transient errors after all retries, or an unreadable image file: not written, so a rerun
-                # (after fixing the file) retries the frame.
-                counts["gave_up"] += 1
-                tqdm.write(f"{futures[future]}: gave up ({exc}); a rerun will retry it")
-            else:
-                append_line(f, line)
-                counts["ok" if line["status"] == 200 else "rejected"] += 1
-                if line["status"] != 200:
-                    tqdm.write(f"{line['id']}: {line['status']} {line.get('error')}")
-            bar.update()
+        output = Output(f, counts, bar)
+        if sequences is None:
+            jobs = [pool.submit(_frame_job, client, dataset, i, root, cfg, output) for i in todo]
+        else:
+            prefix = stream_prefix(out)
+            jobs = [
+                pool.submit(
+                    track_sequence, client, dataset, frames, f"{prefix}-seq{seq}", root, cfg, done, output
+                )
+                for seq, frames in sequences.items()
+            ]
+        for job in jobs:
+            job.result()
     counts["seconds"] = time.perf_counter() - t0
     return counts
+
+
+def _frame_job(
+    client: httpx.Client, dataset: MvorDataset, i: int, root: Path, cfg: ClientConfig, output: Output
+):
+    try:
+        line = post_frame(client, dataset[i], root, cfg)
+    except (httpx.TransportError, RuntimeError, OSError) as exc:
+        output.gave_up(dataset.ids[i], exc)
+    else:
+        output.write(line)
+
+
+# ----------------------------------------------------------------------------------------------- tracking
+class SequenceFrame(NamedTuple):
+    index: int  # in the dataset
+    sequence: int
+    frame_index: int
+    timestamp_s: float
+
+
+def sequence_frames(gt: dict, dataset: MvorDataset) -> dict[int, list[SequenceFrame]]:
+    """Per sequence, its frames of ``dataset`` in time order, from the ``sequence``, ``frame_index`` and
+    ``timestamp_s`` of each multi-view frame (``posenet.data.synth --sequence`` writes them)."""
+    index = {frame_id: i for i, frame_id in enumerate(dataset.ids)}
+    out: dict[int, list[SequenceFrame]] = {}
+    for mv in gt["multiview_images"]:
+        if mv["id"] not in index:
+            continue
+        if not {"sequence", "frame_index", "timestamp_s"} <= mv.keys():
+            raise SystemExit(
+                f"error: frame {mv['id']} has no sequence, frame_index and timestamp_s, which --track needs: "
+                "render sequences with python -m posenet.data.synth --sequence"
+            )
+        frame = SequenceFrame(
+            index[mv["id"]], int(mv["sequence"]), int(mv["frame_index"]), float(mv["timestamp_s"])
+        )
+        out.setdefault(int(mv["sequence"]), []).append(frame)
+    return {seq: sorted(frames, key=lambda f: f.timestamp_s) for seq, frames in sorted(out.items())}
+
+
+def stream_prefix(out: Path) -> str:
+    """The stream ids' prefix of the run writing ``out``: the same for a resumed run (which ends the streams a
+    killed run left), and another for another output file or machine (two runs never share a stream)."""
+    return hashlib.sha1(f"{socket.gethostname()}:{out.resolve()}".encode()).hexdigest()[:10]
+
+
+class StreamLost(Exception):
+    """The server's stream is not the one this run has been feeding (it expired, or the server restarted)."""
+
+
+def end_stream(client: httpx.Client, stream_id: str, cfg: ClientConfig) -> None:
+    r = client.delete(f"/streams/{stream_id}", headers=_headers(cfg), timeout=cfg.timeout_s)
+    if r.status_code not in (200, 404):  # 404: no such stream, which is what we want
+        raise RuntimeError(f"DELETE /streams/{stream_id}: {r.status_code} {r.text[:200]}")
+
+
+def track_sequence(
+    client: httpx.Client,
+    dataset: MvorDataset,
+    frames: list[SequenceFrame],
+    stream_id: str,
+    root: Path,
+    cfg: ClientConfig,
+    done: dict[str, dict],
+    output: Output,
+) -> None:
+    """Send one sequence's ``frames`` in time order through the stream ``stream_id`` and write their lines.
+
+    A sequence whose frames are all in ``done`` is skipped. Otherwise the stream is ended first and the whole
+    sequence sent from its first frame, those already written included (their answers are not written again),
+    so that the tracker has seen every frame before the first new one, and a resumed run's track ids go on
+    from the killed run's (the pipeline and the tracker are deterministic). When the stream is lost on the way
+    (a 409, or a stream that has taken another number of frames than were sent: it expired, or the server
+    restarted), the sequence is sent once more from the start; then its frames not yet written are given up.
+    """
+    written = {dataset.ids[f.index] for f in frames if dataset.ids[f.index] in done}
+    if len(written) == len(frames):
+        return
+    lost: Exception | None = None
+    try:
+        for _ in range(2):
+            end_stream(client, stream_id, cfg)
+            try:
+                _send_sequence(client, dataset, frames, stream_id, root, cfg, written, output)
+            except StreamLost as exc:
+                lost = exc
+                continue
+            end_stream(client, stream_id, cfg)
+            return
+    except (httpx.TransportError, RuntimeError, OSError) as exc:
+        lost = exc
+    output.gave_up(f"stream {stream_id}", lost, len(frames) - len(written))
+
+
+def _send_sequence(client, dataset, frames, stream_id, root, cfg, written: set[str], output: Output) -> None:
+    path = f"/streams/{stream_id}/frames"
+    taken = 0
+    for frame in frames:
+        sample = dataset[frame.index]
+        line = post_frame(client, sample, root, cfg, path, {"timestamp_s": repr(frame.timestamp_s)})
+        line = {
+            "id": line.pop("id"),
+            "day": line.pop("day"),
+            "sequence": frame.sequence,
+            "frame_index": frame.frame_index,
+            "timestamp_s": frame.timestamp_s,
+            **line,
+        }
+        if line["status"] == 409:
+            raise StreamLost(line["error"])
+        if line["status"] == 200:
+            taken += 1
+            if line["response"]["stream"]["frames"] != taken:
+                raise StreamLost(
+                    f"the server's stream {stream_id} has taken {line['response']['stream']['frames']} frames, "
+                    f"but this run sent it {taken}: it expired (ORPOSE_STREAM_IDLE_S) or the server restarted"
+                )
+        if sample.id not in written:
+            output.write(line)
+            written.add(sample.id)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -277,6 +455,27 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--token", default=os.environ.get("ORPOSE_TOKEN"), help="bearer token (env ORPOSE_TOKEN)"
     )
+    track = parser.add_argument_group("tracking (sequences rendered by posenet.data.synth --sequence)")
+    track.add_argument(
+        "--track",
+        action="store_true",
+        help="send each sequence's frames in time order through a stream (POST /streams/{id}/frames, one "
+        "stream per sequence); each person of a line then carries its track_id",
+    )
+    track.add_argument(
+        "--export-easymocap",
+        type=Path,
+        metavar="DIR",
+        help="after the run, write the tracked persons of the whole output as EasyMocap keypoints3d: "
+        "DIR/sequence_S/keypoints3d/NNNNNN.json",
+    )
+    track.add_argument(
+        "--export-csv",
+        type=Path,
+        metavar="FILE",
+        help="after the run, write them as CSV: sequence, frame, timestamp_s, track, joint, x, y, z, "
+        "confidence, spread_mm",
+    )
     parser.add_argument("--timeout", type=float, default=ClientConfig.timeout_s, help="seconds per request")
     parser.add_argument(
         "--retries", type=int, default=ClientConfig.retries, help="retries of a transient failure"
@@ -297,10 +496,19 @@ def main(argv: list[str] | None = None) -> int:
     else:
         gt = load_annotations(args.annotations)
         dataset = MvorDataset(None, gt, days=args.days)  # annotations only: the images are sent as raw files
+    if (args.export_easymocap or args.export_csv) and not args.track:
+        raise SystemExit("--export-easymocap and --export-csv export tracks: they need --track")
+    sequences = None
+    if args.track:
+        if gt is None:
+            raise SystemExit(
+                "--track needs --annotations (with each frame's sequence, frame_index, timestamp_s)"
+            )
+        sequences = sequence_frames(gt, dataset)
     cfg = ClientConfig(
         args.url, args.concurrency, args.reference_boxes, args.token, args.timeout, args.retries
     )
-    counts = run(dataset, args.dataset, args.out, cfg)
+    counts = run(dataset, args.dataset, args.out, cfg, sequences)
     new = counts["ok"] + counts["rejected"]
     print(
         f"frames: {counts['frames']} in scope, {counts['already_done']} already in {args.out}, "
@@ -308,6 +516,16 @@ def main(argv: list[str] | None = None) -> int:
         f"({counts['ok']} ok, {counts['rejected']} rejected by the server), {counts['gave_up']} failed after "
         f"retries; {counts['seconds']:.1f} s, {new / max(counts['seconds'], 1e-9):.2f} frames/s"
     )
+    if args.export_easymocap or args.export_csv:
+        from service.track_export import export_csv, export_easymocap, tracked_frames
+
+        frames = tracked_frames(read_done(args.out).values())
+        if args.export_easymocap:
+            n = export_easymocap(frames, args.export_easymocap)
+            print(f"EasyMocap keypoints3d: {n} frames under {args.export_easymocap}")
+        if args.export_csv:
+            n = export_csv(frames, args.export_csv)
+            print(f"CSV: {n} rows in {args.export_csv}")
     if args.evaluate:
         from posenet.evaluate import evaluate, format_tables
 

@@ -1,5 +1,5 @@
-"""FastAPI dependencies, as ``Annotated`` aliases: settings, the loaded pipeline, the bearer token; and the
-admission to an inference slot."""
+"""FastAPI dependencies, as ``Annotated`` aliases: settings, the loaded pipeline, the streams, the bearer token;
+and the admission to an inference slot."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from service.pipeline import ScenePipeline
 from service.settings import Settings
+from service.streams import StreamRegistry
 
 _bearer = HTTPBearer(
     auto_error=False, description="Required on every route but /health when the server sets ORPOSE_TOKEN"
@@ -47,6 +48,13 @@ def get_pipeline(request: Request) -> ScenePipeline:
 
 
 PipelineDep = Annotated[ScenePipeline, Depends(get_pipeline)]
+
+
+def get_streams(request: Request) -> StreamRegistry:
+    return request.app.state.streams
+
+
+StreamsDep = Annotated[StreamRegistry, Depends(get_streams)]
 
 
 @asynccontextmanager

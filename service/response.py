@@ -86,18 +86,28 @@ def _checked(person: PersonResult) -> Person:
     )
 
 
-def encode(result: SceneResult, scene: ValidatedScene, decode_ms: float, t_start: float) -> bytes:
-    """The response body of ``result``; ``t_start``: the request's perf_counter start (for ``total``)."""
-    t0 = time.perf_counter()
+def scene_out(result: SceneResult, scene: ValidatedScene, decode_ms: float) -> SceneOut:
+    """The checked response of ``result``, its ``encode`` and ``total`` timings still 0 (:func:`serialise`)."""
     _restore_sent_boxes(result.persons, scene)
-    out = SceneOut(
+    return SceneOut(
         mode=result.mode,
         persons=[_checked(p) for p in result.persons],
         notes=_notes(result.persons, scene),
         timings=Timings(decode=decode_ms, encode=0.0, total=0.0, **result.timings),
     )
+
+
+def serialise(out: SceneOut, t0: float, t_start: float) -> bytes:
+    """``out`` as JSON bytes with its ``encode`` (since ``t0``) and ``total`` (since ``t_start``) timings; both
+    are perf_counter readings."""
     out.model_dump_json()
     # The encode time is measured on a first serialisation; the response carries it in the second.
     out.timings.encode = (time.perf_counter() - t0) * 1e3
     out.timings.total = (time.perf_counter() - t_start) * 1e3
     return out.model_dump_json().encode()
+
+
+def encode(result: SceneResult, scene: ValidatedScene, decode_ms: float, t_start: float) -> bytes:
+    """The response body of ``result``; ``t_start``: the request's perf_counter start (for ``total``)."""
+    t0 = time.perf_counter()
+    return serialise(scene_out(result, scene, decode_ms), t0, t_start)

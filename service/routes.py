@@ -1,16 +1,19 @@
-"""The HTTP routes: ``/health``, ``/ready``, ``/model`` and ``POST /scenes``.
+"""The HTTP routes: ``/health``, ``/ready``, ``/model``, ``POST /scenes`` and the streams.
 
 Routes stay thin: ``/scenes`` reads the multipart form into memory, hands the parts to ``service.validation``
 (decoding, off the event loop), runs the pipeline on an inference worker thread, and serialises the result.
+``POST /streams/{stream_id}/frames`` takes the same form through the same code (:func:`scene_result`) and
+hands the result to its stream (``service.streams``); ``DELETE /streams/{stream_id}`` ends one.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Annotated
 
 import anyio
-from fastapi import APIRouter, Depends, HTTPException, Request, Response
+from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response
 from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
 from fastapi.responses import HTMLResponse, JSONResponse
 from python_multipart.multipart import parse_options_header
@@ -19,14 +22,15 @@ from starlette.formparsers import MultiPartException, MultiPartParser
 from starlette.requests import ClientDisconnect
 
 from service.cancel import ClientGone, run_until_disconnected
-from service.deps import PipelineDep, SettingsDep, inference_slot, require_token
+from service.deps import PipelineDep, SettingsDep, StreamsDep, inference_slot, require_token
 from service.errors import UNSUPPORTED_MEDIA, InputError
 from service.model_info import model_info
-from service.pipeline import SceneResult
+from service.pipeline import ScenePipeline, SceneResult
 from service.response import encode
-from service.schemas import Error, Health, ModelInfo, Ready, SceneOut
+from service.schemas import Error, Health, ModelInfo, Ready, SceneOut, StreamEnded, StreamFrameOut
 from service.settings import Settings
-from service.validation import Limits, parse_scene, validate_scene
+from service.streams import MAX_TIMESTAMP_S, check_stream_id, parse_timestamp
+from service.validation import Limits, ValidatedScene, parse_scene, validate_scene
 
 public = APIRouter()
 _UNAUTHORIZED = {
@@ -147,8 +151,11 @@ def _boundary(content_type: str) -> bytes:
     return options.get(b"boundary", b"")
 
 
-async def _read_form(request: Request, settings: Settings) -> tuple[bytes | None, dict[str, bytes]]:
-    """The ``scene`` text and the file parts, all in memory (a spool that never rolls over to disk)."""
+async def _read_form(
+    request: Request, settings: Settings, fields: tuple[str, ...] = ("scene",)
+) -> tuple[dict[str, bytes], dict[str, bytes]]:
+    """The text ``fields`` that are present and the file parts, all in memory (a spool that never rolls over to
+    disk)."""
     boundary = _boundary(request.headers.get("content-type", ""))
     closing = b"--" + boundary + b"--"
     tail = b""
@@ -182,19 +189,19 @@ async def _read_form(request: Request, settings: Settings) -> tuple[bytes | None
                 f"malformed multipart body: it ends without the closing boundary {closing.decode(errors='replace')!r}, "
                 "so the upload was cut short or the form was not finished",
             )
-        return await _form_parts(form)
+        return await _form_parts(form, fields)
     finally:
         await form.close()
 
 
-async def _form_parts(form) -> tuple[bytes | None, dict[str, bytes]]:
-    scene, files = None, {}
+async def _form_parts(form, fields: tuple[str, ...]) -> tuple[dict[str, bytes], dict[str, bytes]]:
+    texts, files = {}, {}
     for name, value in form.multi_items():
         data = await value.read() if isinstance(value, UploadFile) else value.encode()
-        if name == "scene":
-            if scene is not None:
-                raise InputError("the form has more than one 'scene' part")
-            scene = data
+        if name in fields:
+            if name in texts:
+                raise InputError(f"the form has more than one {name!r} part")
+            texts[name] = data
         elif name in files:
             raise InputError(f"the form has more than one {name!r} part")
         elif not isinstance(value, UploadFile):
@@ -202,7 +209,7 @@ async def _form_parts(form) -> tuple[bytes | None, dict[str, bytes]]:
             raise InputError(f"{name} must be a file part (with a filename), e.g. curl -F {name}=@image.png")
         else:
             files[name] = data
-    return scene, files
+    return texts, files
 
 
 @protected.post(
@@ -218,9 +225,27 @@ async def _form_parts(form) -> tuple[bytes | None, dict[str, bytes]]:
 async def post_scene(request: Request, pipeline: PipelineDep, settings: SettingsDep) -> Response:
     t_start = time.perf_counter()
     # Receiving the body holds a receiving place (service.limits), never an inference slot.
-    scene_text, files = await _read_form(request, settings)
-    if scene_text is None:
+    texts, files = await _read_form(request, settings)
+    scene_text = _scene_part(texts)
+    async with inference_slot(request, settings):
+        result, scene, decode_ms = await scene_result(request, pipeline, scene_text, files, t_start)
+    return Response(encode(result, scene, decode_ms, t_start), media_type="application/json")
+
+
+def _scene_part(texts: dict[str, bytes]) -> bytes:
+    if "scene" not in texts:
         raise InputError("missing form part 'scene' (the JSON with the views' cameras)")
+    return texts["scene"]
+
+
+async def scene_result(
+    request: Request, pipeline: ScenePipeline, scene_text: bytes, files: dict[str, bytes], t_start: float
+) -> tuple[SceneResult, ValidatedScene, float]:
+    """Decode and validate a frame's form parts, then run the pipeline on it (called holding an inference slot).
+
+    Returns the result, the validated scene and the decoding time in ms (since ``t_start``, a perf_counter).
+    """
+    settings: Settings = request.app.state.settings
     limits = Limits(
         settings.max_views, settings.max_image_pixels, settings.max_boxes_per_view, pipeline.read_size
     )
@@ -229,26 +254,106 @@ async def post_scene(request: Request, pipeline: PipelineDep, settings: Settings
     def decode():
         return validate_scene(parse_scene(scene_text, limits), files, limits, need_color)
 
-    async with inference_slot(request, settings):
-        scene = await anyio.to_thread.run_sync(decode)
-        decode_ms = (time.perf_counter() - t_start) * 1e3
-        if scene.boxes is None and pipeline.detector is None:
-            raise InputError(
-                'this server runs without a detector (no detector weights loaded, or ORPOSE_LOAD_DETECTOR=false): send reference boxes (per view "boxes", optionally "person_ids")'
-            )
+    scene = await anyio.to_thread.run_sync(decode)
+    decode_ms = (time.perf_counter() - t_start) * 1e3
+    if scene.boxes is None and pipeline.detector is None:
+        raise InputError(
+            'this server runs without a detector (no detector weights loaded, or ORPOSE_LOAD_DETECTOR=false): send reference boxes (per view "boxes", optionally "person_ids")'
+        )
 
-        def infer() -> SceneResult:
-            try:
-                return pipeline.run(scene.views, scene.boxes, scene.person_ids)
-            except InputError:
-                raise
-            except ValueError as exc:  # the models' own checks on what validation let through
-                raise InputError(f"the scene could not be processed: {exc}") from None
-
+    def infer() -> SceneResult:
         try:
-            result = await run_until_disconnected(
-                request.receive, infer, limiter=request.app.state.inference_limiter
-            )
-        except ClientGone as exc:  # nobody reads this answer; it keeps the access log truthful
-            raise HTTPException(400, str(exc)) from None
-    return Response(encode(result, scene, decode_ms, t_start), media_type="application/json")
+            return pipeline.run(scene.views, scene.boxes, scene.person_ids)
+        except InputError:
+            raise
+        except ValueError as exc:  # the models' own checks on what validation let through
+            raise InputError(f"the scene could not be processed: {exc}") from None
+
+    try:
+        result = await run_until_disconnected(
+            request.receive, infer, limiter=request.app.state.inference_limiter
+        )
+    except ClientGone as exc:  # nobody reads this answer; it keeps the access log truthful
+        raise HTTPException(400, str(exc)) from None
+    return result, scene, decode_ms
+
+
+# ----------------------------------------------------------------------------------------------- streams
+_STREAM_ID = Path(
+    description="the stream's name, chosen by the client: 1 to 64 letters, digits, '.', '_' or '-', starting "
+    "with a letter or digit. A frame to a name the server does not hold starts a new stream"
+)
+_STREAM_ERRORS = {
+    **_ERRORS,
+    409: {
+        "model": Error,
+        "description": "the frame is not later than the stream's last frame (or mixes timestamp_s with the "
+        "server's clock); the message says what was expected",
+    },
+    503: {
+        "model": Error,
+        "description": "too many requests in flight or streams held (ORPOSE_MAX_STREAMS; see Retry-After), or "
+        "models not loaded",
+    },
+}
+_STREAM_FORM = {
+    **_SCENE_FORM,
+    "properties": {
+        **_SCENE_FORM["properties"],
+        "timestamp_s": {
+            "type": "number",
+            "minimum": 0,
+            "maximum": MAX_TIMESTAMP_S,
+            "description": "optional: the frame's time in seconds (any clock the client keeps for the whole "
+            "stream, e.g. since the recording started, or Unix time); later than the stream's last frame. "
+            "Without it the server's receive time is used (and then for every frame of the stream)",
+        },
+    },
+}
+
+
+@protected.post(
+    "/streams/{stream_id}/frames",
+    response_model=StreamFrameOut,
+    responses=_STREAM_ERRORS,
+    summary="One frame of a stream: the persons of POST /scenes, each with its track over time",
+    description="The same multipart form as POST /scenes, plus an optional `timestamp_s` field. Frames of one "
+    "stream are answered one at a time and must arrive in time order (else 409). Each person carries its "
+    "`track_id` (stable from frame to frame) and its `smoothed_joints` beside the raw `joints`.",
+    openapi_extra={
+        "requestBody": {
+            "required": True,
+            "content": {_MULTIPART: {"schema": _STREAM_FORM, "encoding": _SCENE_BODY["encoding"]}},
+        }
+    },
+)
+async def post_stream_frame(
+    stream_id: Annotated[str, _STREAM_ID],
+    request: Request,
+    pipeline: PipelineDep,
+    settings: SettingsDep,
+    streams: StreamsDep,
+) -> Response:
+    t_start, received = time.perf_counter(), streams.now()
+    check_stream_id(stream_id)
+    texts, files = await _read_form(request, settings, ("scene", "timestamp_s"))
+    scene_text = _scene_part(texts)
+    timestamp_s = parse_timestamp(texts.get("timestamp_s"))
+    async with inference_slot(request, settings), streams.frame(stream_id, timestamp_s, received) as frame:
+        result, scene, decode_ms = await scene_result(request, pipeline, scene_text, files, t_start)
+        body = frame.answer(result, scene, decode_ms, t_start)
+    return Response(body, media_type="application/json")
+
+
+@protected.delete(
+    "/streams/{stream_id}",
+    response_model=StreamEnded,
+    responses={
+        404: {"model": Error, "description": "no such stream (never started, ended, or expired)"},
+        422: {"model": Error, "description": "the stream id is not valid; the message gives the rule"},
+    },
+    summary="End a stream: its tracks are forgotten, and a later frame to this id starts afresh",
+)
+async def delete_stream(stream_id: Annotated[str, _STREAM_ID], streams: StreamsDep) -> StreamEnded:
+    check_stream_id(stream_id)
+    return streams.end(stream_id)

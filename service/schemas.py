@@ -190,6 +190,68 @@ class SceneOut(BaseModel):
     timings: Timings = Field(..., description="server milliseconds per stage of this request")
 
 
+# ----------------------------------------------------------------------------------------------- streams
+class SmoothedJoint(BaseModel):
+    name: Literal[JOINTS] = Field(..., description="joint name (MVOR order: " + ", ".join(JOINTS) + ")")  # type: ignore[valid-type]
+    position: Vector3 = Field(
+        ...,
+        description="(x, y, z) in mm in the reference frame, as joints[].position: the tracker's estimate "
+        "(smoothed over time, bones held at the track's lengths)",
+    )
+
+
+class TrackedPerson(Person):
+    track_id: int | None = Field(
+        ...,
+        ge=0,
+        description="the person's track in this stream: the same number for the same person from frame to "
+        "frame (0, 1, ... in order of confirmation). null while the person is not (yet) tracked: seen in "
+        "fewer than 3 consecutive frames, a second detection of a tracked person, or too uncertain "
+        "(median joint spread above ORPOSE_TRACK_MAX_SPREAD_MM)",
+    )
+    smoothed_joints: list[SmoothedJoint] = Field(
+        ...,
+        description="the 10 joints as the tracker estimates them, in MVOR order (joints holds the raw ones of "
+        "this frame). For a person the tracker does not follow (no track and no tentative one) they equal "
+        "the raw joints",
+    )
+
+
+class StreamTimings(Timings):
+    track: float = Field(..., description="the tracker's update for this frame, ms")
+
+
+class StreamState(BaseModel):
+    id: str = Field(..., description="the stream's id, as in the path")
+    frames: int = Field(
+        ...,
+        ge=1,
+        description="frames this stream has taken, this one included (1: the stream started with this frame)",
+    )
+    timestamp_s: float = Field(
+        ...,
+        description="this frame's time, s: the request's timestamp_s, or (on a stream whose first frame had "
+        "none) the server's receive time, counted from the stream's first frame",
+    )
+    clock: Literal["client", "server"] = Field(
+        ..., description="client: times are the frames' timestamp_s; server: the server's receive times"
+    )
+
+
+class StreamFrameOut(SceneOut):
+    persons: list[TrackedPerson] = Field(  # type: ignore[assignment]
+        ..., description="everyone found in the frame (empty when nobody is), with their tracks"
+    )
+    timings: StreamTimings = Field(..., description="server milliseconds per stage of this request")  # type: ignore[assignment]
+    stream: StreamState = Field(..., description="the stream this frame went to")
+
+
+class StreamEnded(BaseModel):
+    id: str = Field(..., description="the stream that ended")
+    frames: int = Field(..., ge=0, description="frames it had taken")
+    tracks: int = Field(..., ge=0, description="tracks it had confirmed (ids 0 to tracks - 1)")
+
+
 class Runtime(BaseModel):
     network: Literal["pose", "detector"] = Field(..., description="which network")
     backend: str = Field(..., description="torch, onnxruntime or openvino")

@@ -65,6 +65,23 @@ class Settings(BaseSettings):
     # Checked on the image header before decoding, so a small compressed bomb cannot allocate gigabytes.
     max_image_pixels: int = Field(1920 * 1200, ge=1, description="largest accepted image, width x height")
     max_boxes_per_view: int = Field(64, ge=1, description="most reference boxes in one view")
+    # Streams (POST /streams/{id}/frames): each holds a tracker (a few KB per person) and answers its frames one
+    # at a time. The bound keeps forgotten streams from piling up; the idle time frees the place of a client that
+    # left without DELETE. A tracker ends every track after 1.5 s unseen anyway, so a stream idle for a minute
+    # has nothing left worth keeping.
+    max_streams: int = Field(
+        16, ge=1, le=4096, description="streams held at once (a new stream beyond it: 503 with Retry-After)"
+    )
+    stream_idle_s: float = Field(
+        60.0, gt=0, le=86400, description="a stream that gets no frame for this long ends (expires)"
+    )
+    # posenet.track.TrackerConfig.max_spread_mm, chosen on rendered sequences with the shipped weights; another
+    # checkpoint spreads its joints differently (random weights: ~1000 mm) and may need another value.
+    track_max_spread_mm: float = Field(
+        400.0,
+        gt=0,
+        description="persons whose median joint spread is above this many mm are answered without a track",
+    )
     token: SecretStr | None = Field(
         None,
         description="bearer token; when set every route but /health needs it (the docs too, unless "

@@ -58,6 +58,12 @@ def tiny_checkpoints(folder: Path, seed: int = 0, detector: bool = True) -> tupl
     return pose, det
 
 
+def reference_box_env(folder: Path) -> dict[str, str]:
+    """``ORPOSE_*`` settings of a server with a tiny pose network (written under ``folder``) and no detector."""
+    pose, _ = tiny_checkpoints(folder, detector=False)
+    return {"ORPOSE_POSE_CHECKPOINT": str(pose), "ORPOSE_LOAD_DETECTOR": "false"}
+
+
 def form_kwargs(scene: dict, files: list) -> dict:
     """httpx keyword arguments of a /scenes form: the ``scene`` JSON part and the file parts."""
     return {"data": {"scene": json.dumps(scene)}, "files": files}

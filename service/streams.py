@@ -1,0 +1,253 @@
+"""Streams: a client's frames over time, each answered with its persons' tracks (``posenet.track.Tracker``).
+
+A stream is named by the client (``POST /streams/{stream_id}/frames``) and starts with its first frame. Each
+frame goes through the same form reading, validation and pipeline as ``POST /scenes``
+(``service.routes.scene_result``); then the stream's tracker links its persons to tracks, and the response
+adds a ``track_id`` and the smoothed joints to every person.
+
+- **Order.** A stream answers its frames one at a time (a per-stream lock, taken after the inference slot,
+  so that waiting frames are bounded by ``ORPOSE_MAX_IN_FLIGHT``), and each frame must be later than the last
+  one it took: an older or equal time is a 409 that says what was expected. A rejected frame (4xx) leaves the
+  stream as it was.
+- **Time.** A frame's time is its form field ``timestamp_s`` (seconds, on any clock that the client keeps
+  for the whole stream). A stream whose first frame has none uses the server's receive time instead, counted
+  from that first frame; one stream never mixes the two (409).
+- **Bounds.** At most ``ORPOSE_MAX_STREAMS`` streams are held; one more is a 503 with Retry-After (the time
+  until the least recently used idle stream expires). A stream that gets no frame for
+  ``ORPOSE_STREAM_IDLE_S`` ends; expired streams are dropped whenever a stream route is called. ``DELETE
+  /streams/{stream_id}`` ends one at once; a frame in progress on it is still answered.
+
+Everything here runs on the event loop except the pipeline itself (a worker thread), so the registry needs no
+thread lock; the tracker's update (< 1 ms) runs on the loop under the stream's lock.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections.abc import AsyncIterator, Callable
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+
+import anyio
+import numpy as np
+from fastapi import HTTPException
+
+from posenet.skeleton import JOINTS
+from posenet.track import Tracker
+from service.errors import InputError
+from service.pipeline import SceneResult
+from service.response import scene_out, serialise
+from service.schemas import (
+    SmoothedJoint,
+    StreamEnded,
+    StreamFrameOut,
+    StreamState,
+    StreamTimings,
+    TrackedPerson,
+)
+from service.validation import ValidatedScene
+
+CONFLICT = 409
+STREAM_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+# Times beyond this lose sub-millisecond resolution in a float64 (and no clock of a recording reaches it: Unix
+# time is 1.8e9 s).
+MAX_TIMESTAMP_S = 1e11
+
+
+def check_stream_id(stream_id: str) -> None:
+    if not STREAM_ID.fullmatch(stream_id):
+        raise InputError(
+            f"stream id {stream_id[:80]!r} is not valid: use 1 to 64 letters, digits, '.', '_' or '-', "
+            "starting with a letter or digit (e.g. or2-sequence-1)"
+        )
+
+
+def parse_timestamp(text: bytes | None) -> float | None:
+    """The ``timestamp_s`` form field as seconds, or None when it is absent; 422 when it is not a time."""
+    if text is None:
+        return None
+    try:
+        value = float(text.decode(errors="replace").strip())
+    except ValueError:
+        value = math.nan
+    if not (0 <= value <= MAX_TIMESTAMP_S):  # NaN fails too
+        raise InputError(
+            f"timestamp_s {text[:40].decode(errors='replace')!r} is not a time: give the frame's time in seconds "
+            f"as a number from 0 to {MAX_TIMESTAMP_S:.0e} (e.g. 12.067, or Unix time), or leave the field out to "
+            "use the server's receive time"
+        )
+    return value
+
+
+@dataclass
+class Stream:
+    """One stream's state: its tracker, the last time it took, and who is using it."""
+
+    id: str
+    tracker: Tracker
+    last_used: float  # the registry's clock, s: when a request last finished with it
+    lock: anyio.Lock = field(default_factory=anyio.Lock)
+    users: int = 0  # requests holding or waiting for the lock: the stream does not expire under them
+    frames: int = 0
+    clock: str | None = None  # "client" or "server", fixed by the first frame taken
+    last_time: float | None = None  # the last frame's time on that clock, s
+    origin: float = 0.0  # server clock: the first frame's receive time (registry clock)
+
+
+class StreamRegistry:
+    """The streams of one app, bounded in number and expiring when idle (module docstring).
+
+    ``now`` is the clock of idle times and server timestamps (monotonic seconds).
+    """
+
+    def __init__(
+        self,
+        max_streams: int,
+        idle_s: float,
+        tracker: Callable[[], Tracker],
+        retry_after_s: int = 1,
+        now: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.max_streams = max_streams
+        self.idle_s = idle_s
+        self.tracker = tracker
+        self.retry_after_s = retry_after_s
+        self.now = now
+        self.streams: dict[str, Stream] = {}
+
+    def expire(self) -> None:
+        now = self.now()
+        for sid in [s.id for s in self.streams.values() if not s.users and now - s.last_used > self.idle_s]:
+            del self.streams[sid]
+
+    def open(self, stream_id: str) -> Stream:
+        """The stream ``stream_id``, started if it does not exist; 503 when the registry is full."""
+        self.expire()
+        stream = self.streams.get(stream_id)
+        if stream is not None:
+            return stream
+        if len(self.streams) >= self.max_streams:
+            idle = [self.idle_s - (self.now() - s.last_used) for s in self.streams.values() if not s.users]
+            wait = math.ceil(max(min(idle), 0.0)) + 1 if idle else self.retry_after_s
+            raise HTTPException(
+                503,
+                f"the server already holds {self.max_streams} streams (ORPOSE_MAX_STREAMS): end one you no longer "
+                f"need (DELETE /streams/{{stream_id}}), or retry after {wait} s, when the least recently used "
+                f"idle stream expires (ORPOSE_STREAM_IDLE_S = {self.idle_s:g} s without a frame)",
+                headers={"Retry-After": str(wait)},
+            )
+        stream = self.streams[stream_id] = Stream(stream_id, self.tracker(), self.now())
+        return stream
+
+    def end(self, stream_id: str) -> StreamEnded:
+        """End ``stream_id`` now; 404 when there is no such stream."""
+        self.expire()
+        stream = self.streams.pop(stream_id, None)
+        if stream is None:
+            raise HTTPException(
+                404,
+                f"there is no stream {stream_id!r}: it never took a frame, was ended already, or expired after "
+                f"{self.idle_s:g} s without a frame (ORPOSE_STREAM_IDLE_S)",
+            )
+        return StreamEnded(id=stream.id, frames=stream.frames, tracks=stream.tracker.next_id)
+
+    @asynccontextmanager
+    async def frame(self, stream_id: str, timestamp_s: float | None, received: float) -> AsyncIterator[Frame]:
+        """Hold ``stream_id`` for one frame: its lock, and the frame's time checked against the stream's last.
+
+        ``timestamp_s``: the client's time, or None for the server's; ``received``: the request's arrival on
+        the registry's clock. Raises 409 when the frame is not later than the stream's last one.
+        """
+        stream = self.open(stream_id)
+        stream.users += 1
+        try:
+            async with stream.lock:
+                clock = "server" if timestamp_s is None else "client"
+                yield Frame(stream, _frame_time(stream, clock, timestamp_s, received), clock, received)
+        finally:
+            stream.users -= 1
+            stream.last_used = self.now()
+
+
+def _frame_time(stream: Stream, clock: str, timestamp_s: float | None, received: float) -> float:
+    """The frame's time on the stream's clock; 409 unless it is later than the stream's last frame."""
+    if stream.clock is None:  # the first frame: it fixes the clock once it is taken (Frame.answer)
+        return 0.0 if timestamp_s is None else timestamp_s
+    sid = stream.id
+    if clock != stream.clock:
+        fix = "give timestamp_s with every frame" if stream.clock == "client" else "leave timestamp_s out"
+        raise HTTPException(
+            CONFLICT,
+            f"stream {sid!r} takes its times from the {stream.clock} "
+            f"({'its frames carry timestamp_s' if stream.clock == 'client' else 'its first frame had no timestamp_s'})"
+            f", and one stream never mixes clocks: {fix}, or end the stream (DELETE /streams/{sid}) to start over",
+        )
+    if clock == "client":
+        t = timestamp_s
+        if t <= stream.last_time:
+            raise HTTPException(
+                CONFLICT,
+                f"frames of stream {sid!r} must arrive in time order: timestamp_s {t:g} is not later than its "
+                f"last frame's {stream.last_time:g}; expected a timestamp_s above {stream.last_time:g} (send "
+                f"frames in order, one after the other's answer), or end the stream (DELETE /streams/{sid}) "
+                "to start over",
+            )
+        return t
+    t = received - stream.origin
+    if t <= stream.last_time:
+        raise HTTPException(
+            CONFLICT,
+            f"this frame of stream {sid!r} arrived at {t:.3f} s (server clock, from the stream's first frame), "
+            f"before its last frame ({stream.last_time:.3f} s) was taken: send a stream's frames one at a time, "
+            "each after the previous one's answer, or give each frame its timestamp_s",
+        )
+    return t
+
+
+@dataclass
+class Frame:
+    """One frame being taken by a stream (inside :meth:`StreamRegistry.frame`)."""
+
+    stream: Stream
+    time: float  # s, on the stream's clock
+    clock: str  # "client" or "server"
+    received: float  # the request's arrival, registry clock
+
+    def answer(self, result: SceneResult, scene: ValidatedScene, decode_ms: float, t_start: float) -> bytes:
+        """Track ``result``'s persons, commit the frame to the stream, and return the response body.
+
+        The stream changes only here, after every check has passed, so a rejected frame leaves it as it was.
+        """
+        t0 = time.perf_counter()
+        out = scene_out(result, scene, decode_ms)  # 422 on a non-finite estimate, before the tracker sees it
+        stream = self.stream
+        joints = np.array([p.joints for p in result.persons], np.float64).reshape(-1, len(JOINTS), 3)
+        spread = np.array([p.confidence for p in result.persons], np.float64).reshape(-1, len(JOINTS))
+        t_track = time.perf_counter()
+        tracked = stream.tracker.update(joints, spread, self.time)
+        track_ms = (time.perf_counter() - t_track) * 1e3
+        if stream.clock is None:
+            stream.clock, stream.origin = self.clock, self.received
+        stream.frames += 1
+        stream.last_time = self.time
+        persons = [
+            TrackedPerson(
+                **person.model_dump(),
+                track_id=t.track_id,
+                smoothed_joints=[
+                    SmoothedJoint(name=name, position=[float(x) for x in xyz])
+                    for name, xyz in zip(JOINTS, t.joints, strict=True)
+                ],
+            )
+            for person, t in zip(out.persons, tracked, strict=True)
+        ]
+        body = StreamFrameOut(
+            mode=out.mode,
+            persons=persons,
+            notes=out.notes,
+            timings=StreamTimings(**out.timings.model_dump(), track=track_ms),
+            stream=StreamState(id=stream.id, frames=stream.frames, timestamp_s=self.time, clock=stream.clock),
+        )
+        return serialise(body, t0, t_start)

@@ -1,0 +1,249 @@
+"""Streams end to end: a real uvicorn process, real HTTP, tiny random-init models, a rendered sequence.
+
+One server serves the module, with a token, at most 2 streams, streams that expire after 3 s idle, and the
+tracker's spread limit raised to 5 m: random weights spread every joint over ~1 m (their joints still follow
+each person's boxes, 2 m apart in the sequence, so the tracker can follow them). Frames are a 6-frame sequence
+rendered by ``posenet.data.synth --sequence`` (2 persons, 2 views, 10 fps), sent in reference-box mode with the
+annotated ids, exactly as the batch client sends them.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+import time
+
+import httpx
+import numpy as np
+import pytest
+from service_harness import REPO_ROOT, Server, form_kwargs, reference_box_env
+
+from posenet.data.mvor import MvorDataset, load_annotations
+from posenet.data.synth.__main__ import main as synth
+from posenet.skeleton import JOINTS
+from service.client import scene_request, stream_prefix
+
+TOKEN = "s3cret"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+FRAMES = 6
+IDLE_S = 3.0
+
+
+class Sequence:
+    def __init__(self, root, gt) -> None:
+        self.root, self.gt = root, gt
+        self.ds = MvorDataset(None, gt)
+        self.times = [mv["timestamp_s"] for mv in gt["multiview_images"]]
+
+    def form(self, k: int, timestamp_s: float | str | None = None) -> dict:
+        form = form_kwargs(*scene_request(self.ds[k], self.root, True))
+        if timestamp_s is not None:
+            form["data"]["timestamp_s"] = str(timestamp_s)  # str(float) is repr: exact
+        return form
+
+
+@pytest.fixture(scope="module")
+def sequence(tmp_path_factory):
+    root = tmp_path_factory.mktemp("sequence")
+    synth(["--out", str(root), "--sequence", "--frames", str(FRAMES), "--persons", "2", "--views", "2",
+           "--fps", "10", "--seed", "1", "--quiet"])  # fmt: skip
+    return Sequence(root, load_annotations(root / "annotations.json"))
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    env = {
+        **reference_box_env(tmp_path_factory.mktemp("ckpt")),
+        "ORPOSE_TOKEN": TOKEN,
+        "ORPOSE_MAX_STREAMS": "2",
+        "ORPOSE_STREAM_IDLE_S": str(IDLE_S),
+        "ORPOSE_TRACK_MAX_SPREAD_MM": "5000",
+    }
+    with Server(env) as url, httpx.Client(base_url=url, headers=AUTH, timeout=60) as client:
+        yield client
+
+
+def frame(
+    server, stream: str, sequence: Sequence, k: int, timestamp_s: float | str | None = None
+) -> httpx.Response:
+    return server.post(f"/streams/{stream}/frames", **sequence.form(k, timestamp_s))
+
+
+def ok(r: httpx.Response) -> dict:
+    assert r.status_code == 200, r.text
+    return r.json()
+
+
+def track_of(out: dict) -> dict[int, int | None]:
+    """annotated person id -> track id, in one frame's answer."""
+    return {p["id"]: p["track_id"] for p in out["persons"]}
+
+
+# ----------------------------------------------------------------------------------------------- tracking
+def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequence):
+    answers = [ok(frame(server, "seq-a", sequence, k, t)) for k, t in enumerate(sequence.times)]
+    try:
+        for k, out in enumerate(answers):
+            assert out["stream"] == {"id": "seq-a", "frames": k + 1, "timestamp_s": sequence.times[k],
+                                     "clock": "client"}  # fmt: skip
+            assert out["mode"] == "reference_boxes" and out["timings"]["track"] >= 0
+            for p in out["persons"]:
+                assert [j["name"] for j in p["smoothed_joints"]] == list(JOINTS)
+        # Tracks are confirmed at the third consecutive frame; from then on each person keeps its own id.
+        assert set(track_of(answers[0]).values()) == {None}
+        ids = [track_of(out) for out in answers[2:]]
+        assert ids[0] and None not in ids[0].values() and len(set(ids[0].values())) == len(ids[0])
+        assert all(i == ids[0] for i in ids), ids
+        # The raw joints are those of POST /scenes (one code path); the smoothed ones are the tracker's.
+        last = len(sequence.times) - 1
+        scenes = ok(server.post("/scenes", **sequence.form(last)))
+        raw = {p["id"]: np.array([j["position"] for j in p["joints"]]) for p in answers[-1]["persons"]}
+        for p in scenes["persons"]:
+            np.testing.assert_allclose(raw[p["id"]], [j["position"] for j in p["joints"]], atol=1e-3)
+        for p in answers[-1]["persons"]:
+            smoothed = np.array([j["position"] for j in p["smoothed_joints"]])
+            moved = np.linalg.norm(smoothed - raw[p["id"]], axis=-1)
+            assert moved.max() > 0.1 and moved.mean() < 300, moved  # filtered, and still that person
+    finally:
+        ended = server.delete("/streams/seq-a")
+    assert ended.status_code == 200 and ended.json() == {"id": "seq-a", "frames": FRAMES, "tracks": 2}
+
+
+def test_frames_out_of_time_order_get_409_and_leave_the_stream_as_it_was(server, sequence):
+    assert ok(frame(server, "seq-b", sequence, 0, 1.0))["stream"]["frames"] == 1
+    try:
+        for t in (0.5, 1.0):  # older, and equal
+            r = frame(server, "seq-b", sequence, 1, t)
+            assert r.status_code == 409, r.text
+            assert "expected a timestamp_s above 1" in r.json()["detail"]
+        r = frame(server, "seq-b", sequence, 1)  # the server's clock on a stream that runs on the client's
+        assert r.status_code == 409 and "never mixes clocks" in r.json()["detail"]
+        assert ok(frame(server, "seq-b", sequence, 1, 1.1))["stream"]["frames"] == 2
+        # Bad times and names are 422s that say what to send.
+        for bad in ("abc", "nan", "inf", "-1"):
+            r = frame(server, "seq-b", sequence, 2, bad)
+            assert r.status_code == 422 and "is not a time" in r.json()["detail"], (bad, r.text)
+        for bad in ("-x", "a%20b", "x" * 65):
+            r = server.post(f"/streams/{bad}/frames", **sequence.form(2, 5.0))
+            assert r.status_code == 422 and "stream id" in r.json()["detail"], (bad, r.text)
+        assert server.post("/streams/seq-b/frames", headers={"Authorization": ""}).status_code == 401
+        bare = sequence.form(2, 5.0)
+        del bare["data"]["scene"]
+        r = server.post("/streams/seq-b/frames", **bare)
+        assert r.status_code == 422 and "missing form part 'scene'" in r.json()["detail"]
+    finally:
+        assert server.delete("/streams/seq-b").json()["frames"] == 2
+
+
+def test_without_timestamp_s_the_server_clock_orders_the_frames(server, sequence):
+    first = ok(frame(server, "seq-clock", sequence, 0))["stream"]
+    second = ok(frame(server, "seq-clock", sequence, 1))["stream"]
+    server.delete("/streams/seq-clock")
+    assert first["clock"] == second["clock"] == "server"
+    assert first["timestamp_s"] == 0.0 < second["timestamp_s"] < 60
+
+
+def test_delete_then_post_starts_afresh(server, sequence):
+    for k in range(3):
+        ok(frame(server, "seq-c", sequence, k, sequence.times[k]))
+    assert server.delete("/streams/seq-c").json() == {"id": "seq-c", "frames": 3, "tracks": 2}
+    r = server.delete("/streams/seq-c")
+    assert r.status_code == 404 and "there is no stream 'seq-c'" in r.json()["detail"]
+    out = ok(
+        frame(server, "seq-c", sequence, 0, sequence.times[0])
+    )  # an earlier time is fine on a new stream
+    assert out["stream"]["frames"] == 1 and set(track_of(out).values()) == {None}
+    server.delete("/streams/seq-c")
+
+
+def test_streams_are_bounded(server, sequence):
+    ok(frame(server, "lim-1", sequence, 0, 0.0))
+    ok(frame(server, "lim-2", sequence, 0, 0.0))
+    try:
+        r = frame(server, "lim-3", sequence, 0, 0.0)
+        assert r.status_code == 503, r.text
+        assert "ORPOSE_MAX_STREAMS" in r.json()["detail"] and 1 <= int(r.headers["retry-after"]) <= IDLE_S + 1
+        assert ok(frame(server, "lim-1", sequence, 1, 0.1))["stream"]["frames"] == 2  # held ones go on
+        server.delete("/streams/lim-1")
+        assert ok(frame(server, "lim-3", sequence, 0, 0.0))["stream"]["frames"] == 1
+    finally:
+        for sid in ("lim-1", "lim-2", "lim-3"):
+            server.delete(f"/streams/{sid}")
+
+
+def test_an_idle_stream_expires(server, sequence):
+    ok(frame(server, "idle", sequence, 0, 5.0))
+    ok(frame(server, "idle-2", sequence, 0, 5.0))
+    time.sleep(IDLE_S + 0.5)
+    # Both have expired: a third stream finds room, and an older time starts "idle" afresh.
+    ok(frame(server, "idle-3", sequence, 0, 0.0))
+    assert ok(frame(server, "idle", sequence, 1, 1.0))["stream"]["frames"] == 1
+    r = server.delete("/streams/idle-2")
+    assert r.status_code == 404 and "expired" in r.json()["detail"]
+    server.delete("/streams/idle")
+    server.delete("/streams/idle-3")
+
+
+# ----------------------------------------------------------------------------------------------- the client
+def read_lines(path) -> list[dict]:
+    return [json.loads(x) for x in path.read_text().splitlines()]
+
+
+def test_client_track_writes_tracks_and_both_exports_and_resumes(server, sequence, tmp_path):
+    out, mocap, table = tmp_path / "tracks.jsonl", tmp_path / "mocap", tmp_path / "tracks.csv"
+    cmd = [sys.executable, "-m", "service.client", str(sequence.root), "--annotations",
+           str(sequence.root / "annotations.json"), "--url", str(server.base_url).rstrip("/"), "--out", str(out),
+           "--token", TOKEN, "--reference-boxes", "--track", "--export-easymocap", str(mocap),
+           "--export-csv", str(table)]  # fmt: skip
+
+    def client():
+        run = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+        assert run.returncode == 0, run.stdout + run.stderr
+
+    client()
+    lines = read_lines(out)
+    assert [(x["sequence"], x["frame_index"], x["status"]) for x in lines] == [
+        (1, k, 200) for k in range(FRAMES)
+    ]
+    assert [x["id"] for x in lines] == sequence.ds.ids  # today's keys are all there
+    assert all({"day", "latency_ms", "response"} <= x.keys() for x in lines)
+    ids = [{p["id"]: p["track_id"] for p in x["response"]["persons"]} for x in lines]
+    assert len(set(ids[2].values())) == 2 and all(i == ids[2] for i in ids[2:])
+    # The run ended its stream.
+    assert server.delete(f"/streams/{stream_prefix(out)}-seq1").status_code == 404
+
+    # EasyMocap: one file per frame, the tracked persons' smoothed joints with c = 1.
+    files = sorted((mocap / "sequence_1" / "keypoints3d").iterdir())
+    assert [f.name for f in files] == [f"{k:06d}.json" for k in range(FRAMES)]
+    for f, line in zip(files, lines, strict=True):
+        people = json.loads(f.read_text())
+        tracked = [p for p in line["response"]["persons"] if p["track_id"] is not None]
+        assert [p["id"] for p in people] == [p["track_id"] for p in tracked]
+        for person, p in zip(people, tracked, strict=True):
+            kp = np.array(person["keypoints3d"])
+            assert kp.shape == (len(JOINTS), 4) and (kp[:, 3] == 1).all()
+            np.testing.assert_allclose(kp[:, :3], [j["position"] for j in p["smoothed_joints"]])
+    # CSV: a row per tracked joint, the same numbers.
+    with open(table, newline="") as f:
+        rows = list(csv.DictReader(f))
+    expected = [(line["frame_index"], p["track_id"], j["name"], *j["position"])
+                for line in lines for p in line["response"]["persons"] if p["track_id"] is not None
+                for j in p["smoothed_joints"]]  # fmt: skip
+    got = [
+        (int(r["frame"]), int(r["track"]), r["joint"], float(r["x"]), float(r["y"]), float(r["z"]))
+        for r in rows
+    ]
+    assert got == expected and len(got) == 2 * len(JOINTS) * (FRAMES - 2)
+    assert all(r["sequence"] == "1" and r["confidence"] == "" and float(r["spread_mm"]) > 0 for r in rows)
+
+    # Resume after a kill that lost the last two lines: the sequence is replayed and the ids go on as before.
+    text = out.read_text().splitlines(keepends=True)
+    out.write_text("".join(text[:-2]))
+    client()
+    again = read_lines(out)
+    assert [x["id"] for x in again] == sequence.ds.ids
+    assert [[p["track_id"] for p in x["response"]["persons"]] for x in again] == [
+        [p["track_id"] for p in x["response"]["persons"]] for x in lines
+    ]
