@@ -59,6 +59,13 @@ class InputConfig:
         self.source_size = None if self.source_size is None else tuple(self.source_size)
 
     @property
+    def read_size(self) -> tuple[int, int] | None:
+        """(W, H) that the network reads views at: ``image_size`` in full mode, ``source_size`` in crop mode (None:
+        views as given). The one record of the input resolution: training (:func:`record_read_size`), offline
+        prediction and the service all read views by it (:func:`reduction`), so they feed the network alike."""
+        return self.image_size if self.mode == "full" else self.source_size
+
+    @property
     def in_channels(self) -> int:
         colour = 3 if self.modality in ("rgb", "rgbd") else 0
         depth = (1 + 2 * self.extra_depth) if self.modality in ("depth", "rgbd") else 0
@@ -102,6 +109,38 @@ class SceneInput:
     @property
     def num_persons(self) -> int:
         return self.has_box.shape[0]
+
+
+def reduction(width: int, height: int, read_size: tuple[int, int] | None) -> int:
+    """The largest k of 8, 4, 2 that divides a ``width`` x ``height`` image into one still at least ``read_size``
+    (W, H) in both axes; 1 when none does (or ``read_size`` is None: keep the image as given). Readers subsample
+    by it (``posenet.predict``) and the service decodes by it, then :func:`build_scene` resizes the rest."""
+    if read_size is None:
+        return 1
+    for k in (8, 4, 2):
+        if width % k == 0 and height % k == 0 and width // k >= read_size[0] and height // k >= read_size[1]:
+            return k
+    return 1
+
+
+def record_read_size(config: InputConfig, image_size: tuple[int, int], subsample: int) -> None:
+    """Check or record the input resolution for training on ``image_size`` (W, H) views subsampled by ``subsample``.
+
+    A crop-mode config without ``source_size`` records the training reader's size, so that predicting and serving
+    later crop from views of that resolution too. A config that records one must be read with the subsampling
+    that prediction and serving will use (:func:`reduction`), else the network would train on other pixels than
+    it meets later: ValueError naming the factor to use.
+    """
+    W, H = image_size
+    if config.read_size is None:
+        config.source_size = (W // subsample, H // subsample)
+        return
+    k = reduction(W, H, config.read_size)
+    if subsample != k:
+        raise ValueError(
+            f"subsample {subsample} reads the {W}x{H} views at {W // subsample}x{H // subsample}, but the model "
+            f"reads them at {config.read_size} (subsampled by {k}) when predicting and serving: use subsample {k}"
+        )
 
 
 def resize_view(
@@ -215,7 +254,7 @@ def build_scene(
         )
     if config.modality != "depth" and any(v[0] is None for v in views):
         raise ValueError(f"modality {config.modality!r} needs colour images, but a view has none")
-    target = config.image_size if config.mode == "full" else config.source_size
+    target = config.read_size
     if target is not None:
         resized = [resize_view(c, d, cam, target) for c, d, cam in views]
         factors = torch.tensor([r[3] for r in resized], dtype=torch.float32).repeat(

@@ -22,7 +22,8 @@ from tqdm import tqdm
 
 from posenet.checkpoint import load_checkpoint
 from posenet.evaluate import prediction_record
-from posenet.inputs import build_scene, persons_of_sample
+from posenet.execution import PRECISIONS
+from posenet.inputs import InputConfig, build_scene, persons_of_sample, reduction
 from posenet.model import PoseNet, predict_scenes
 
 
@@ -62,6 +63,20 @@ def predict_samples(
     return preds
 
 
+def read_dataset(root, annotations, inputs: InputConfig, days=None):
+    """The ``MvorDataset`` of ``root`` read at the resolution the model reads (``InputConfig.read_size``): its
+    views subsampled by :func:`posenet.inputs.reduction`, as the service decodes a frame sent at full size."""
+    from posenet.data.mvor import MvorDataset, load_annotations  # the reader pulls in image I/O
+
+    if not isinstance(annotations, dict):
+        annotations = load_annotations(annotations)
+    meta = MvorDataset(None, annotations, modalities=(), days=days)
+    if len(meta) == 0:
+        return meta
+    W, H = meta[0].views[0].camera.size  # full size (subsample 1)
+    return MvorDataset(root, annotations, subsample=reduction(W, H, inputs.read_size), days=days)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m posenet.predict",
@@ -88,6 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda")
     p.add_argument(
+        "--precision", choices=PRECISIONS, default="auto", help="how this machine runs it (posenet.execution)"
+    )
+    p.add_argument(
         "--flip-test",
         action=argparse.BooleanOptionalAction,
         default=None,
@@ -98,15 +116,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from posenet.data.mvor import MvorDataset  # the reader pulls in image I/O; keep --help instant
-
     if args.threads:
         torch.set_num_threads(args.threads)
-    model, config = load_checkpoint(args.checkpoint, args.device)
+    model, _ = load_checkpoint(args.checkpoint, args.device, args.precision)
     if args.flip_test is not None:
         model.config.flip_test = args.flip_test
-    subsample = int(config.get("subsample", 1))
-    data = MvorDataset(args.data, args.annotations, subsample=subsample, days=args.days)
+    data = read_dataset(args.data, args.annotations, model.config.inputs, args.days)
     preds = predict_samples(model, data, args.scenes_per_batch)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(preds))

@@ -38,7 +38,7 @@ from tqdm import tqdm
 from posenet.augment import AugmentConfig
 from posenet.checkpoint import save_checkpoint
 from posenet.execution import PRECISIONS
-from posenet.inputs import InputConfig, build_scene, persons_of_sample
+from posenet.inputs import InputConfig, build_scene, persons_of_sample, record_read_size
 from posenet.loss import mpjpe, reprojection_2d
 from posenet.model import ModelConfig, PoseNet
 from posenet.schedule import Schedule, lr_factor  # noqa: F401  (lr_factor: posenet.train's public name)
@@ -233,6 +233,8 @@ def train(cfg: TrainConfig) -> dict:
     if not train_days:
         raise ValueError(f"no training days left after holding out day {cfg.holdout_day}")
     modalities = ("depth",) if cfg.model.inputs.modality == "depth" else ("color", "depth")
+    full_size = MvorDataset(None, annotations, modalities=(), days=train_days)[0].views[0].camera.size
+    record_read_size(cfg.model.inputs, full_size, cfg.subsample)  # the model config records the resolution
     train_set = MvorDataset(cfg.data, annotations, cfg.subsample, modalities, days=train_days)
     frames = trainable_frames(annotations, cfg.subsample, train_days)
     if cfg.max_frames:

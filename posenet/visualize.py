@@ -154,13 +154,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from posenet.data.mvor import MvorDataset
     from posenet.inputs import persons_of_sample
+    from posenet.predict import read_dataset
 
     est = PoseEstimator.from_checkpoint(args.checkpoint)
-    data = MvorDataset(
-        args.data, args.annotations, subsample=int(est.config.get("subsample", 1)), days=args.days
-    )
+    data = read_dataset(args.data, args.annotations, est.model.config.inputs, args.days)
     index = data.ids.index(args.frame) if args.frame in data.ids else int(args.frame)
     if not 0 <= index < len(data):
         raise ValueError(f"--frame {args.frame}: the dataset has {len(data)} frames")

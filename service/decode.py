@@ -3,8 +3,8 @@
 Sizes are read from the file header *before* decoding, so that a small, highly compressed image cannot make
 the server allocate gigabytes. Frames are decoded in memory only; nothing is written to disk or logged.
 
-**At the resolution the models read** (``reduce`` k, from :func:`reduction`): when a view is an exact multiple
-k of what the networks read (640x480 against the pose network's 320x240), it is brought to 1/k right here, in the
+**At the resolution the models read** (``reduce`` k, from ``posenet.inputs.reduction``): when a view is an exact
+multiple k of what the networks read (640x480 against the pose network's 320x240), it is brought to 1/k right here, in the
 decoding threads, with the reader's own functions (block mean for colour, lower median of the valid depths), so
 that every later stage handles a quarter of the pixels and a served frame meets the network exactly as in
 training. A JPEG colour image is decoded at 1/k directly by libjpeg's DCT scaling (``IMREAD_REDUCED_COLOR_k``),
@@ -23,17 +23,6 @@ from posenet.data.images import subsample_color, subsample_depth
 from service.errors import PAYLOAD_TOO_LARGE, UNSUPPORTED_MEDIA, InputError
 
 _REDUCED_COLOR = {2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4, 8: cv2.IMREAD_REDUCED_COLOR_8}
-
-
-def reduction(width: int, height: int, read_size: tuple[int, int] | None) -> int:
-    """The largest k of 8, 4, 2 that divides a ``width`` x ``height`` image into one still at least ``read_size``
-    (W, H) in both axes; 1 when none does (or ``read_size`` is None: keep the image as sent)."""
-    if read_size is None:
-        return 1
-    for k in (8, 4, 2):
-        if width % k == 0 and height % k == 0 and width // k >= read_size[0] and height // k >= read_size[1]:
-            return k
-    return 1
 
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -111,7 +100,7 @@ def decode_color(
     data: bytes, name: str = "color", max_pixels: int = 1920 * 1200, reduce: int = 1
 ) -> np.ndarray:
     """A colour PNG or JPEG to ``(H / reduce, W / reduce, 3)`` uint8 RGB (grey images are expanded to three
-    channels). ``reduce`` must divide both sides (:func:`reduction`)."""
+    channels). ``reduce`` must divide both sides (``posenet.inputs.reduction``)."""
     size = _checked_size(data, name, max_pixels)
     if reduce > 1 and image_format(data) == "jpeg":
         bgr = _decode(data, name, _REDUCED_COLOR[reduce], (size[0] // reduce, size[1] // reduce))

@@ -119,10 +119,9 @@ class ScenePipeline:
     @property
     def read_size(self) -> tuple[int, int] | None:
         """(W, H) of the largest views that the networks read: views an exact multiple of it larger can be
-        decoded smaller without changing what the networks see (``service.decode.reduction``). None when the
+        decoded smaller without changing what the networks see (``posenet.inputs.reduction``). None when the
         pose network crops from views as they are given (no ``source_size``)."""
-        inputs = self.pose.model.config.inputs
-        size = inputs.image_size if inputs.mode == "full" else inputs.source_size
+        size = self.pose.model.config.inputs.read_size
         if size is None:
             return None
         if self.detector is not None:  # the detector resizes to its input width, keeping the aspect

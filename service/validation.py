@@ -16,7 +16,8 @@ import pydantic
 import torch
 
 from posenet.cameras import Camera, is_rigid
-from service.decode import decode_color, decode_depth, header_size, reduction
+from posenet.inputs import reduction
+from service.decode import decode_color, decode_depth, header_size
 from service.errors import InputError
 from service.pipeline import FrameView
 from service.schemas import SceneIn, ViewIn
@@ -30,7 +31,7 @@ class Limits:
     max_image_pixels: int = 1920 * 1200
     max_boxes_per_view: int = 64
     # (W, H) that the models read (ScenePipeline.read_size): views that are an exact multiple of it are decoded
-    # at that resolution (service.decode.reduction); None keeps every view as sent.
+    # at that resolution (posenet.inputs.reduction); None keeps every view as sent.
     read_size: tuple[int, int] | None = None
 
 

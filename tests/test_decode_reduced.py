@@ -11,7 +11,8 @@ import pytest
 import torch
 
 from posenet.data.images import subsample_color, subsample_depth
-from service.decode import decode_color, decode_depth, reduction
+from posenet.inputs import reduction
+from service.decode import decode_color, decode_depth
 from service.pipeline import PersonResult, SceneResult
 from service.response import _restore_sent_boxes
 from service.validation import Limits, parse_scene, validate_scene
