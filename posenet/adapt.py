@@ -56,7 +56,7 @@ from posenet.adapt_losses import (
     view_consistency,
 )
 from posenet.augment import AugmentConfig
-from posenet.checkpoint import load_checkpoint, save_checkpoint
+from posenet.checkpoint import DEFAULT_WEIGHTS, load_checkpoint, save_checkpoint
 from posenet.inputs import ScenePersons, build_scene, persons_of_sample
 from posenet.loss import mpjpe
 from posenet.model import ModelConfig, PoseNet
@@ -322,6 +322,7 @@ def adapt(cfg: AdaptConfig) -> dict:
         raise ValueError(f"no target frame with a boxed, identified person in days {cfg.days or 'all'}")
     source = source_frames(cfg) if cfg.source > 0 else Frames([], [])
     cfg.data_description = {
+        "init": str(cfg.init or DEFAULT_WEIGHTS),
         "annotations": str(cfg.annotations or Path(cfg.data) / "annotations.json"),
         "target_days": cfg.days,
         "target_frames": len(target),
