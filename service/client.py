@@ -46,9 +46,11 @@ from typing import NamedTuple
 import httpx
 from tqdm import tqdm
 
+from posenet.boxes import ground_truth_ids, identified
 from posenet.data.images import depth_file_name
 from posenet.data.mvor import MvorDataset, load_annotations
 from posenet.data.sample import Sample
+from posenet.evaluate import prediction_record
 
 RETRY_STATUSES = {429, 502, 503, 504}
 
@@ -82,9 +84,8 @@ def scene_request(sample: Sample, root: Path, reference_boxes: bool) -> tuple[di
             "depth_scale_mm": 1.0,
         }  # fmt: skip
         if reference_boxes:
-            keep = view.box_person_ids >= 0  # boxes without an identity have no 3D pose to estimate
-            entry["boxes"] = view.boxes[keep].tolist()
-            entry["person_ids"] = view.box_person_ids[keep].tolist()
+            boxes, ids = identified(view.boxes, view.box_person_ids)  # no identity: no 3D pose to estimate
+            entry["boxes"], entry["person_ids"] = boxes.tolist(), ids.tolist()
         views.append(entry)
         color = root / view.file_name
         depth = root / depth_file_name(view.file_name)
@@ -186,8 +187,6 @@ def append_line(f, line: dict) -> None:
 # ----------------------------------------------------------------------------------------------- evaluation
 def predictions(lines: dict[str, dict], dataset: MvorDataset) -> list[dict]:
     """The output's persons in ``posenet.evaluate``'s format; detector-mode ids are associated by box IoU."""
-    from service.association import ground_truth_ids
-
     by_id = {sample_id: i for i, sample_id in enumerate(dataset.ids)}
     preds = []
     for frame_id, line in lines.items():
@@ -206,8 +205,9 @@ def predictions(lines: dict[str, dict], dataset: MvorDataset) -> list[dict]:
             ids = [p["id"] for p in persons]
         for person, pid in zip(persons, ids, strict=True):
             if pid is not None:
-                xyz = [c for joint in person["joints"] for c in joint["position"]]
-                preds.append({"image_ids": frame_id, "person_id": pid, "keypoints3D": xyz})
+                joints = person["joints"]
+                xyz, spread = [j["position"] for j in joints], [j["confidence"] for j in joints]
+                preds.append(prediction_record(frame_id, pid, xyz, spread))
     return preds
 
 
