@@ -16,8 +16,8 @@ import pytest
 from conftest import write_tiny_mvor
 from service_harness import REPO_ROOT, Server, free_port, tiny_checkpoints
 
-from posenet.data.mvor import MvorDataset
 from posenet.boxes import assign, mean_view_iou
+from posenet.data.mvor import MvorDataset
 from service.client import ClientConfig, append_line, lock_output, predictions, read_done, run
 
 
