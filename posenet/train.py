@@ -36,6 +36,7 @@ import torch.distributed as dist
 from tqdm import tqdm
 
 from posenet.augment import AugmentConfig
+from posenet.boxes import person_ids
 from posenet.checkpoint import save_checkpoint
 from posenet.execution import PRECISIONS
 from posenet.inputs import InputConfig, build_scene, persons_of_sample, record_read_size
@@ -176,7 +177,7 @@ def trainable_frames(annotations: dict, subsample: int, days, which: str = "anno
         if poses:
             found = any(any(b is not None for b in s.person_boxes(int(p))) for p in s.person_ids)
         else:
-            found = any((v.box_person_ids >= 0).any() for v in s.views)
+            found = bool(person_ids([v.box_person_ids for v in s.views]))
         if found:
             keep.append(i)
     return keep
