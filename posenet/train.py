@@ -53,6 +53,9 @@ class TrainConfig:
     # More datasets (MVOR layout, each with its own annotations.json) whose every day is used for training, e.g.
     # procedural scenes beside the MVOR twin. The held-out day only ever refers to --data.
     extra_data: list[str] = field(default_factory=list)
+    # Start from these weights (a run folder, checkpoint folder or NAME.safetensors, e.g. the shipped
+    # posenet/weights/default.safetensors) with a fresh optimiser and schedule; the model config must match.
+    init: str | None = None
     holdout_day: int | None = (
         None  # the fold's test day (validation); None trains on every day, no validation
     )
@@ -211,6 +214,26 @@ def validate(model: PoseNet, annotations: dict, dataset, days) -> dict:
     }
 
 
+def load_init_weights(model: PoseNet, path: str) -> None:
+    """Load the weights of checkpoint ``path`` into ``model``; a clear error when they do not fit its config."""
+    from safetensors.torch import load_file
+
+    from posenet.checkpoint import checkpoint_files
+
+    weights, _ = checkpoint_files(path)
+    fix = "give the same --preset, --base, --depth, --modality and --extra-depth as the run that made it"
+    try:
+        missing, unexpected = model.load_state_dict(load_file(weights, device="cpu"), strict=False)
+    except RuntimeError as e:  # a tensor of another shape
+        raise ValueError(
+            f"--init {path} does not fit this run's model ({str(e).splitlines()[-1].strip()}): {fix}"
+        ) from None
+    if missing or unexpected:
+        raise ValueError(
+            f"--init {path} does not fit this run's model (missing {missing[:3]}, unexpected {unexpected[:3]}): {fix}"
+        )
+
+
 # ----------------------------------------------------------------------------- training
 def train(cfg: TrainConfig) -> dict:
     from posenet.data.mvor import MvorDataset, collate_samples, load_annotations
@@ -291,6 +314,10 @@ def train(cfg: TrainConfig) -> dict:
 
     start_epoch, best = 0, float("inf")
     state_file = out / "last" / "train_state.pt"
+    if cfg.init and not state_file.is_file():
+        load_init_weights(model, cfg.init)
+        if rank == 0:
+            print(f"initialised from {cfg.init}", file=sys.stderr)
     if state_file.is_file():
         from safetensors.torch import load_file
 
@@ -424,6 +451,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--subsample", type=int, help="reader subsampling (2: the paper's 320x240 from 640x480)")
     g.add_argument("--max-frames", type=int, help="only the first N training frames (smoke runs)")
+    g.add_argument(
+        "--init",
+        metavar="CKPT",
+        help="start from these weights (run folder, checkpoint folder or NAME.safetensors such as "
+        "posenet/weights/default.safetensors) with a fresh optimiser and schedule: fine-tuning",
+    )
     g.add_argument(
         "--no-cache", dest="cache", action="store_false", default=None, help="do not keep frames in RAM"
     )

@@ -126,3 +126,26 @@ def test_torchrun_ddp_gloo_two_processes(tiny, tmp_path):
     # 4 training frames split over 2 processes: rank 0 saw 2 of them
     assert log[0]["scenes"] == 2
     assert (run / "last" / "model.safetensors").is_file()
+
+
+def test_cli_init_starts_from_given_weights(tiny, tmp_path):
+    from safetensors.torch import load_file
+
+    from posenet.train import load_init_weights
+
+    root, _ = tiny
+    first, second = tmp_path / "first", tmp_path / "second"
+    base = ["--data", str(root), "--holdout-day", "2", *TINY[:-2]]
+    assert train_main([*base, "--out", str(first), "--epochs", "1", "--val-every", "1"]) == 0
+    start = load_file(first / "last" / "model.safetensors")
+    model = PoseNet(ModelConfig(inputs=InputConfig(crop_size=32), base=8))
+    load_init_weights(model, str(first / "last"))
+    assert all(torch.equal(model.state_dict()[k], v) for k, v in start.items())
+    # a zero-length budget: the run saves the weights it started from, and records where they came from
+    assert train_main([*base, "--out", str(second), "--init", str(first / "last"), "--minutes", "0"]) == 0
+    saved = json.loads((second / "config.json").read_text())
+    assert saved["init"] == str(first / "last")
+    with pytest.raises(ValueError, match="does not fit"):
+        load_init_weights(
+            PoseNet(ModelConfig(inputs=InputConfig(crop_size=32), base=16)), str(first / "last")
+        )
