@@ -104,10 +104,13 @@ def test_cli_time_budget_stops_and_resumes(tiny, tmp_path):
     root, _ = tiny
     run = tmp_path / "budget"
     base = ["--data", str(root), "--holdout-day", "2", "--out", str(run)]
-    assert train_main([*base, *TINY[:-2], "--minutes", "0.02", "--warmup", "0.1"]) == 0
+    assert (
+        train_main([*base, *TINY[:-2], "--minutes", "0.02", "--warmup", "0.1", "--decay-start", "0.1"]) == 0
+    )
     log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
     assert log[-1]["minutes"] >= 0.02 and "val_mpjpe_cm" in log[-1]  # spent, then validated
-    assert all(r["steps"] > 0 for r in log) and log[-1]["lr"] < 1e-3  # the schedule decayed with the clock
+    # warm-up then decay from 10 % of the budget on: below the base LR however few steps a loaded machine makes
+    assert all(r["steps"] > 0 for r in log) and log[-1]["lr"] < 1e-3
     # resuming with a larger budget continues the clock (and the step count) where it stopped
     assert train_main([*base, "--resume", "--minutes", "0.04"]) == 0
     more = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()][len(log) :]
