@@ -39,6 +39,7 @@ import math
 import sys
 from collections import defaultdict
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -64,16 +65,20 @@ def _type_means(errors: np.ndarray, mask: np.ndarray, types: Iterable[str]) -> d
     return {t: _nanmean(joint_means[list(JOINT_TYPES[t])].tolist()) for t in types}
 
 
-def prediction_record(image_ids: str, person_id: int, joints, confidence=None) -> dict:
+def prediction_record(image_ids: str, person_id: int, joints, spread_mm=None, confidence=None) -> dict:
     """One prediction in this module's format, as every producer writes it (``posenet.predict``, the service's
     pipeline and batch client).
 
     Args:
         image_ids: the multi-view frame id; person_id: the ground-truth person id it is matched by.
-        joints: (J, 3) mm, reference frame. confidence: (J,) mm, the pose network's spread per joint (smaller is
-            more certain), or None; an extra key that the evaluator ignores.
+        joints: (J, 3) mm, reference frame.
+        spread_mm: (J,) mm, the pose network's spread per joint (smaller is more certain), or None.
+        confidence: (J,) in [0, 1], the calibrated confidence per joint (``posenet.calibration``), or None.
+        Both are extra keys that the evaluator ignores. (Files written before the rename hold the spread under
+        ``"confidence"``; nothing here reads it.)
 
-    Numbers are rounded to 0.01 mm (far below any error measured here; it keeps the files small).
+    Numbers are rounded to 0.01 mm (far below any error measured here; it keeps the files small) and the
+    confidence to 1e-4.
     """
     joints = np.asarray(joints, np.float64)
     if joints.shape != (NUM_JOINTS, 3):
@@ -83,8 +88,10 @@ def prediction_record(image_ids: str, person_id: int, joints, confidence=None) -
         "person_id": int(person_id),
         "keypoints3D": [round(float(x), 2) for x in joints.reshape(-1)],
     }
+    if spread_mm is not None:
+        record["spread_mm"] = [round(float(x), 2) for x in np.asarray(spread_mm, np.float64).reshape(-1)]
     if confidence is not None:
-        record["confidence"] = [round(float(x), 2) for x in np.asarray(confidence, np.float64).reshape(-1)]
+        record["confidence"] = [round(float(x), 4) for x in np.asarray(confidence, np.float64).reshape(-1)]
     return record
 
 
@@ -105,6 +112,82 @@ def _parse_prediction(pred: dict, index: int) -> tuple[tuple[str, int], np.ndarr
     return (str(pred["image_ids"]), int(pred["person_id"])), joints.reshape(NUM_JOINTS, 3)
 
 
+@dataclass
+class Matched:
+    """The in-scope ground-truth poses (N of them) and the prediction matched to each (module docstring).
+
+    gt_joints, pred_joints: (N, J, 3) mm (NaN where no prediction); valid: (N, J) annotated joints; matched: (N,)
+    whether a prediction was found; support: (N,) supporting views; records: N prediction dicts or None;
+    errors: (N, J) mm (NaN where no prediction). unmatched / out_of_scope: counts of predictions."""
+
+    gt_joints: np.ndarray
+    pred_joints: np.ndarray
+    valid: np.ndarray
+    matched: np.ndarray
+    support: np.ndarray
+    records: list[dict | None]
+    unmatched: int
+    out_of_scope: int
+
+    @property
+    def errors(self) -> np.ndarray:
+        return np.linalg.norm(self.pred_joints - self.gt_joints, axis=-1)  # (N, J)
+
+
+def match_predictions(
+    gt: dict,
+    predictions: list[dict],
+    image_ids: set[str] | None = None,
+    days: Iterable[int] | None = None,
+) -> Matched:
+    """Match ``predictions`` to the ground-truth poses of ``gt`` in scope (arguments as :func:`evaluate`)."""
+    check_annotations(gt)
+    support = pose_support(gt)
+    frame_day = {mv["id"]: image_day(mv["images"][0]) for mv in gt["multiview_images"]}
+    days = None if days is None else {int(d) for d in days}
+
+    def in_scope(frame: str) -> bool:
+        if image_ids is not None and frame not in image_ids:
+            return False
+        return days is None or frame_day.get(frame) in days
+
+    preds = defaultdict(list)
+    out_of_scope = 0
+    for i, pred in enumerate(predictions):
+        key, joints = _parse_prediction(pred, i)
+        if key[0] in frame_day and not in_scope(key[0]):
+            out_of_scope += 1
+        else:
+            preds[key].append((joints, pred))
+
+    gt_joints, gt_valid, gt_support, pred_joints, records = [], [], [], [], []
+    used = defaultdict(int)
+    for i, (pose, s) in enumerate(zip(gt["annotations3D"], support, strict=True)):
+        if not in_scope(pose["image_ids"]):
+            continue
+        key = (str(pose["image_ids"]), int(pose["person_id"]))
+        joints, valid = pose_joints(pose, i)
+        gt_joints.append(joints)
+        gt_valid.append(valid)
+        gt_support.append(s)
+        k = used[key]
+        used[key] += 1
+        found = preds[key][k] if k < len(preds.get(key, ())) else None
+        records.append(None if found is None else found[1])
+        pred_joints.append(np.full((NUM_JOINTS, 3), np.nan) if found is None else found[0])
+    n = len(gt_joints)
+    return Matched(
+        np.asarray(gt_joints, np.float64).reshape(n, NUM_JOINTS, 3),
+        np.asarray(pred_joints, np.float64).reshape(n, NUM_JOINTS, 3),
+        np.asarray(gt_valid, bool).reshape(n, NUM_JOINTS),
+        np.asarray([r is not None for r in records], bool),
+        np.asarray(gt_support, np.int64),
+        records,
+        sum(max(0, len(v) - used.get(key, 0)) for key, v in preds.items()),
+        out_of_scope,
+    )
+
+
 def evaluate(
     gt: dict,
     predictions: list[dict],
@@ -123,48 +206,10 @@ def evaluate(
         ``{"per_joint": {type: cm, "average": cm}, "per_support": {"1": {...}, ...}, "overall": cm,
         "counts": {...}}``. Means over nothing are NaN.
     """
-    check_annotations(gt)
-    support = pose_support(gt)
-    frame_day = {mv["id"]: image_day(mv["images"][0]) for mv in gt["multiview_images"]}
-    days = None if days is None else {int(d) for d in days}
-
-    def in_scope(frame: str) -> bool:
-        if image_ids is not None and frame not in image_ids:
-            return False
-        return days is None or frame_day.get(frame) in days
-
-    preds = defaultdict(list)
-    out_of_scope = 0
-    for i, pred in enumerate(predictions):
-        key, joints = _parse_prediction(pred, i)
-        if key[0] in frame_day and not in_scope(key[0]):
-            out_of_scope += 1
-        else:
-            preds[key].append(joints)
-
-    gt_joints, gt_valid, gt_support, pred_joints, has_pred = [], [], [], [], []
-    used = defaultdict(int)
-    for i, (pose, s) in enumerate(zip(gt["annotations3D"], support, strict=True)):
-        if not in_scope(pose["image_ids"]):
-            continue
-        key = (str(pose["image_ids"]), int(pose["person_id"]))
-        joints, valid = pose_joints(pose, i)
-        gt_joints.append(joints)
-        gt_valid.append(valid)
-        gt_support.append(s)
-        k = used[key]
-        used[key] += 1
-        has_pred.append(k < len(preds.get(key, ())))
-        pred_joints.append(preds[key][k] if has_pred[-1] else np.full((NUM_JOINTS, 3), np.nan))
-    unmatched = sum(max(0, len(v) - used.get(key, 0)) for key, v in preds.items())
-
-    n = len(gt_joints)
-    gt_arr = np.asarray(gt_joints).reshape(n, NUM_JOINTS, 3)
-    pred_arr = np.asarray(pred_joints).reshape(n, NUM_JOINTS, 3)
-    valid = np.asarray(gt_valid, bool).reshape(n, NUM_JOINTS)
-    matched = np.asarray(has_pred, bool)
-    support_arr = np.asarray(gt_support, np.int64)
-    errors = np.linalg.norm(pred_arr - gt_arr, axis=-1)  # (N, J) mm, NaN where no prediction
+    m = match_predictions(gt, predictions, image_ids, days)
+    n, valid, matched, support_arr = len(m.records), m.valid, m.matched, m.support
+    unmatched, out_of_scope = m.unmatched, m.out_of_scope
+    errors = m.errors  # (N, J) mm, NaN where no prediction
     mask = valid & matched[:, None]  # (N, J)
 
     per_joint = _type_means(errors, mask, JOINT_TYPES)

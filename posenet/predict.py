@@ -7,7 +7,8 @@ Usage::
 
 Every person id (>= 0) with a box in some view of a frame gets a prediction, from the reference boxes of the
 annotation file. Output: a json list of ``{"image_ids", "person_id", "keypoints3D": [J*3 floats, mm]}`` plus
-``"confidence": [J floats, mm]`` (extra keys are ignored by the evaluator).
+``"spread_mm": [J floats, mm]`` (the network's spread) and ``"confidence": [J floats in [0, 1]]`` (calibrated by the
+checkpoint's ``posenet.calibration``); the evaluator ignores extra keys.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from posenet.calibration import Calibration
 from posenet.checkpoint import load_checkpoint
 from posenet.evaluate import prediction_record
 from posenet.execution import PRECISIONS
@@ -28,11 +30,18 @@ from posenet.model import PoseNet, predict_scenes
 
 
 def predict_samples(
-    model: PoseNet, samples, scenes_per_batch: int = 4, which: str = "boxed", progress: bool = True
+    model: PoseNet,
+    samples,
+    scenes_per_batch: int = 4,
+    which: str = "boxed",
+    progress: bool = True,
+    calibration: Calibration | None = None,
 ):
     """Predictions (evaluator format) for an iterable of ``Sample``s; ``scenes_per_batch`` scenes share one
-    U-Net pass. ``which``: ``"boxed"`` predicts every boxed person, ``"annotated"`` those with a 3D pose."""
+    U-Net pass. ``which``: ``"boxed"`` predicts every boxed person, ``"annotated"`` those with a 3D pose.
+    ``calibration`` turns the spreads into confidences (None: the fallback curve of ``posenet.calibration``)."""
     model.eval()
+    calibration = calibration or Calibration()
     preds: list[dict] = []
     pending: list[tuple] = []
 
@@ -47,10 +56,12 @@ def predict_samples(
         with torch.inference_mode():
             outs = predict_scenes(model, build, len(pending))
         for (sample_id, persons), out in zip(pending, outs, strict=True):
+            spread = out.confidence.cpu()  # (P, J) mm: the lifting's spread
+            confidence = calibration(spread, persons.has_box.sum(1))  # (P, J)
             for k, pid in enumerate(persons.person_ids.tolist()):
                 if not bool(out.has_points[k]):
                     continue  # no pixel with depth in any of its boxes: nothing to lift
-                preds.append(prediction_record(sample_id, pid, out.joints[k].cpu(), out.confidence[k].cpu()))
+                preds.append(prediction_record(sample_id, pid, out.joints[k].cpu(), spread[k], confidence[k]))
         pending.clear()
 
     for sample in tqdm(samples, desc="predict", disable=not progress, leave=False):
@@ -118,11 +129,11 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
-    model, _ = load_checkpoint(args.checkpoint, args.device, args.precision)
+    model, config = load_checkpoint(args.checkpoint, args.device, args.precision)
     if args.flip_test is not None:
         model.config.flip_test = args.flip_test
     data = read_dataset(args.data, args.annotations, model.config.inputs, args.days)
-    preds = predict_samples(model, data, args.scenes_per_batch)
+    preds = predict_samples(model, data, args.scenes_per_batch, calibration=Calibration.from_config(config))
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(preds))
     print(f"wrote {len(preds)} predictions for {len(data)} frames to {args.out}", file=sys.stderr)
