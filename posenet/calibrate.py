@@ -3,11 +3,12 @@
 Usage (the shipped weights; the fit data is rendered with a seed no training run used)::
 
     python -m posenet.data.synth --out data/calib_rand --scenes 60 --rig mvor --look random --seed 99 --workers 1
-    python -m posenet.calibrate --data data/calib_rand --days 1 2 3 4 \\
+    python -m posenet.data.synth --out data/calib_twinlook --scenes 60 --rig mvor --look twin --seed 99 --workers 1
+    python -m posenet.calibrate --data data/calib_rand --data data/calib_twinlook \\
         --test data/mvor_twin:4 --test data/mvor_alt:4 --plot docs/img/calibration.png --write
 
-It predicts every annotated person of the ``--data`` days with its reference boxes, measures each joint's 3D
-error, fits P(error <= ``--radius-mm``) from the spread, the joint type and the number of supporting views,
+It predicts every annotated person of the ``--data`` sets (``DIR[:DAY,DAY...]``, pooled) with its reference
+boxes, measures each joint's 3D error, fits P(error <= ``--radius-mm``) from the spread, the joint type and the number of supporting views,
 and prints the expected calibration error (ECE) of the fallback curve and of the fit on the fit data and on
 each ``--test`` set (``DIR[:DAY,DAY...]``). ``--write`` stores the fit under ``"calibration"`` in the
 checkpoint's json (``posenet/weights/default.json`` for the shipped weights), where ``posenet.infer`` and
@@ -91,7 +92,7 @@ def plot(results: dict[str, dict], path: Path) -> None:
         ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--")
         for (cal, rel), colour in zip(by_cal.items(), ("tab:orange", "tab:blue"), strict=False):
             conf, rate, count = (np.asarray(rel[k], float) for k in ("confidence", "rate", "count"))
-            shown = count > 0
+            shown = count >= 10  # bins of a handful of joints say nothing
             ax.plot(conf[shown], rate[shown], "o-", color=colour, label=f"{cal}: ECE {rel['ece']:.3f}")
         ax.set(xlim=(0, 1), ylim=(0, 1), xlabel="confidence (predicted P(error <= 10 cm))")
         ax.set_title(
@@ -119,16 +120,24 @@ def data_set(text: str) -> tuple[Path, list[int] | None]:
     return Path(folder), [int(d) for d in days.split(",")] if days else None
 
 
+def _days(days: list[int] | None) -> str:
+    return "all" if days is None else ",".join(map(str, days))
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m posenet.calibrate", description=__doc__.split("\n")[0])
     p.add_argument(
         "--checkpoint", default=None, help="checkpoint folder or NAME.safetensors (default: shipped)"
     )
-    p.add_argument("--data", type=Path, required=True, help="fit data: an MVOR-format dataset root")
     p.add_argument(
-        "--annotations", type=Path, default=None, help="its annotation json (default DATA/annotations.json)"
+        "--data",
+        type=data_set,
+        action="append",
+        required=True,
+        metavar="DIR[:D,D]",
+        help="fit data: MVOR-format dataset roots (DIR/annotations.json), repeatable; pooled",
     )
-    p.add_argument("--days", type=int, nargs="*", default=None, help="fit days (default: all)")
+    p.add_argument("--days", type=int, nargs="*", default=None, help="fit days of a --data without its own")
     p.add_argument(
         "--test", type=data_set, action="append", default=[], metavar="DIR[:D,D]", help="test sets"
     )
@@ -148,20 +157,23 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
     _, config_file = checkpoint_files(args.checkpoint)
     model, config = load_checkpoint(args.checkpoint, "cpu", "fp32")
-    fit_joints = measure(model, args.data, args.annotations, args.days, args.cache)
+    fit_sets = [(folder, args.days if days is None else days) for folder, days in args.data]
+    measured = [measure(model, folder, None, days, args.cache) for folder, days in fit_sets]
+    fit_joints = {k: np.concatenate([m[k] for m in measured]) for k in measured[0]}
     cal = fit(
         fit_joints["spread_mm"], fit_joints["joint"], fit_joints["support"], fit_joints["error_mm"],
         args.radius_mm, args.ridge,
     )  # fmt: skip
     calibrations = {"fallback": Calibration(radius_mm=args.radius_mm), "fitted": cal}
-    days = "all" if args.days is None else ",".join(map(str, args.days))
-    sets = {f"fit: {args.data.name} days {days}": fit_joints}
+    fit_name = " + ".join(f"{folder} days {_days(days)}" for folder, days in fit_sets)
+    sets = {"fit: " + " + ".join(f"{f.name} {_days(d)}" for f, d in fit_sets): fit_joints}
     for folder, test_days in args.test:
-        label = "all" if test_days is None else ",".join(map(str, test_days))
-        sets[f"test: {folder.name} days {label}"] = measure(model, folder, None, test_days, args.cache)
+        sets[f"test: {folder.name} days {_days(test_days)}"] = measure(
+            model, folder, None, test_days, args.cache
+        )
     results = {name: report(calibrations, joints, args.radius_mm) for name, joints in sets.items()}
     cal.info = {
-        "fit_data": f"{args.data} days {days}",
+        "fit_data": fit_name,
         "fit_joints": int(len(fit_joints["error_mm"])),
         "ridge": args.ridge,
         "ece": {name: {k: round(r["ece"], 4) for k, r in by.items()} for name, by in results.items()},

@@ -122,10 +122,10 @@ def _logistic(X: np.ndarray, y: np.ndarray, ridge: float, iterations: int = 100)
     """Newton's method (IRLS) for L2-penalised logistic regression (the first T columns, the intercepts,
     unpenalised; the penalty keeps a type whose joints all hit or all miss finite)."""
     w = np.zeros(X.shape[1])
-    penalty = np.full(X.shape[1], ridge)
+    penalty = np.full(X.shape[1], float(ridge))
     penalty[: len(TYPE_NAMES)] = ridge * 1e-3
     for _ in range(iterations):
-        p = 1.0 / (1.0 + np.exp(-(X @ w)))
+        p = 1.0 / (1.0 + np.exp(-np.clip(X @ w, -30.0, 30.0)))
         grad = X.T @ (p - y) + penalty * w
         hess = (X * (p * (1 - p))[:, None]).T @ X + np.diag(penalty)
         step = np.linalg.solve(hess, grad)

@@ -97,7 +97,9 @@ def test_fit_keeps_slopes_non_positive():
     spread = rng.uniform(10, 500, n)
     joint = np.zeros(n, int)  # head only
     hit = rng.random(n) < spread / 500
-    got = fit(spread, joint, np.ones(n, int), np.where(hit, 0.0, 200.0))
+    got = fit(
+        spread, joint, np.ones(n, int), np.where(hit, 0.0, 200.0), ridge=1
+    )  # an int ridge, other types absent
     assert got.log_spread[0] == 0.0 and all(b <= 0 for b in got.log_spread)
 
 
