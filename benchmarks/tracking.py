@@ -46,7 +46,7 @@ def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -
                 "persons": [
                     {
                         "joints": p.joints.round(2).tolist(),
-                        "spread_mm": p.confidence.round(2).tolist(),
+                        "spread_mm": p.spread_mm.round(2).tolist(),
                         "support": p.support,
                     }
                     for p in result.persons

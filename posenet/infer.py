@@ -5,7 +5,8 @@ Usage::
     est = PoseEstimator.from_checkpoint("runs/fold4/best")          # None -> the shipped default weights
     pred = est.predict(views, person_boxes)                        # views: V x (color, depth, Camera)
     pred.joints      # (P, J, 3) mm, reference (camera 0) frame
-    pred.confidence  # (P, J) mm: the spread of each joint's 3D point cloud (see posenet.lifting)
+    pred.spread_mm   # (P, J) mm: the spread of each joint's 3D point cloud (see posenet.lifting)
+    pred.confidence  # (P, J) in [0, 1]: calibrated P(error <= 10 cm) (see posenet.calibration)
 
 Any image size works: the input pipeline crops and resizes internally (:mod:`posenet.inputs`) and keeps the
 cameras right. Runs under ``torch.inference_mode``, at the precision chosen for this machine
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from posenet.calibration import Calibration
 from posenet.cameras import Camera
 from posenet.checkpoint import load_checkpoint
 from posenet.inputs import build_scene
@@ -33,13 +35,15 @@ Tensor = torch.Tensor
 
 @dataclass
 class PosePrediction:
-    """joints (P, J, 3) mm reference frame; confidence (P, J) mm (smaller = more certain); has_points (P,)
-    whether any pixel could vote (else joints are meaningless); heatmaps (P, V, J, M) logits at the points,
+    """joints (P, J, 3) mm reference frame; spread_mm (P, J) mm (smaller = more certain); has_points (P,)
+    whether any pixel could vote (else joints are meaningless); confidence (P, J) in [0, 1], the checkpoint's
+    calibration of the spread (``posenet.calibration``); heatmaps (P, V, J, M) logits at the points,
     with their uv (P or 1, V, M, 2), depth and valid mask, when asked for (visualisation)."""
 
     joints: Tensor
-    confidence: Tensor
+    spread_mm: Tensor
     has_points: Tensor
+    confidence: Tensor
     heatmaps: Tensor | None = None
     uv: Tensor | None = None
     depth: Tensor | None = None
@@ -53,6 +57,7 @@ class PoseEstimator:
         self.device = torch.device(device)
         self.model = model.to(self.device).eval()
         self.config = config or {}
+        self.calibration = Calibration.from_config(self.config)  # spread -> confidence
         self.backend = Backend("torch", "the default of PoseEstimator")
 
     @classmethod
@@ -135,7 +140,7 @@ class PoseEstimator:
         J = self.model.config.unet.out_channels
         if boxes.shape[0] == 0:
             z = torch.zeros(0, J)
-            return PosePrediction(torch.zeros(0, J, 3), z, torch.zeros(0, dtype=torch.bool))
+            return PosePrediction(torch.zeros(0, J, 3), z, torch.zeros(0, dtype=torch.bool), z)
         views = list(views)
         scenes = {}
 
@@ -148,8 +153,9 @@ class PoseEstimator:
         scene = scenes[False]
         pred = PosePrediction(
             out.joints.cpu(),
-            out.confidence.cpu(),
+            out.confidence.cpu(),  # the lifting's spread, mm
             (out.has_points & has_box.any(1).to(out.has_points.device)).cpu(),
+            self.calibration(out.confidence.cpu(), has_box.sum(1)),
         )
         if return_heatmaps:
             pred.heatmaps, pred.uv, pred.depth, pred.valid = (

@@ -46,6 +46,11 @@ class JointEstimate:
     confidence: Tensor
     has_points: Tensor
 
+    @property
+    def spread_mm(self) -> Tensor:
+        """``confidence`` under the name the API gives it (a spread in mm, not a probability)."""
+        return self.confidence
+
 
 def lift(cameras: Camera, uv: Tensor, depth: Tensor) -> Tensor:
     """Lift pixels to reference-frame points.

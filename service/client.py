@@ -206,8 +206,9 @@ def predictions(lines: dict[str, dict], dataset: MvorDataset) -> list[dict]:
         for person, pid in zip(persons, ids, strict=True):
             if pid is not None:
                 joints = person["joints"]
-                xyz, spread = [j["position"] for j in joints], [j["confidence"] for j in joints]
-                preds.append(prediction_record(frame_id, pid, xyz, spread))
+                xyz = [j["position"] for j in joints]
+                spread, confidence = [j["spread_mm"] for j in joints], [j["confidence"] for j in joints]
+                preds.append(prediction_record(frame_id, pid, xyz, spread, confidence))
     return preds
 
 

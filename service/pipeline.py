@@ -2,7 +2,8 @@
 
 This is the object that the app and the offline evaluation share. It knows nothing of HTTP: it takes decoded
 numpy views with their cameras (and optionally reference boxes) and returns persons with their joints in mm
-in the reference frame, per-joint confidence, the supporting views and boxes, and per-stage timings.
+in the reference frame, per-joint spread and calibrated confidence, the supporting views and boxes, and
+per-stage timings.
 
 Offline use::
 
@@ -20,6 +21,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+import torch
 
 from posenet.boxes import ground_truth_ids, identified
 from posenet.cameras import Camera
@@ -61,9 +63,11 @@ class PersonResult:
     Attributes:
         id: the client's person id (reference-box mode with ids) or an index within the scene.
         joints: (J, 3) float mm, reference frame.
-        confidence: (J,) float, the pose network's per-joint spread in mm (smaller is more certain).
+        confidence: (J,) float in [0, 1], the calibrated probability that each joint lies within 10 cm
+            (``posenet.calibration``, from the spread and the number of supporting views).
         boxes: V entries: the person's (4,) xyxy box in that view, or None where it has none.
         scores: V entries: the detector score of that box, or None (reference box or no box).
+        spread_mm: (J,) float, the pose network's per-joint spread in mm (smaller is more certain).
     """
 
     id: int
@@ -71,6 +75,7 @@ class PersonResult:
     confidence: np.ndarray
     boxes: list[np.ndarray | None]
     scores: list[float | None]
+    spread_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def support(self) -> list[int]:
@@ -285,9 +290,12 @@ class ScenePipeline:
         if persons:
             prediction = self.pose.predict(list(views), [p.boxes for p in persons])
             joints = np.asarray(prediction.joints, dtype=np.float64)  # (P, J, 3)
-            confidence = np.asarray(prediction.confidence, dtype=np.float64)  # (P, J)
+            spread = torch.as_tensor(prediction.spread_mm, dtype=torch.float64).cpu()  # (P, J) mm
+            support = torch.tensor([len(p.support) for p in persons])  # (P,)
+            confidence = self.pose.calibration(spread, support).numpy()  # (P, J) in [0, 1]
             for p, person in enumerate(persons):
                 person.joints, person.confidence = joints[p], confidence[p]
+                person.spread_mm = spread[p].numpy()
             # A person whose boxes hold no valid depth has no lifted points: its joints mean nothing.
             has_points = np.asarray(prediction.has_points, dtype=bool)  # (P,)
             persons = [p for p, ok in zip(persons, has_points, strict=True) if ok]
@@ -312,7 +320,7 @@ class ScenePipeline:
             result = self.run(views)
             ids = ground_truth_ids(sample, [p.boxes for p in result.persons])
         predictions = [
-            prediction_record(sample.id, pid, p.joints, p.confidence)
+            prediction_record(sample.id, pid, p.joints, p.spread_mm, p.confidence)
             for p, pid in zip(result.persons, ids, strict=True)
             if pid is not None
         ]

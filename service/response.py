@@ -68,7 +68,7 @@ def _notes(persons: list[PersonResult], scene: ValidatedScene) -> list[str]:
 
 
 def _checked(person: PersonResult) -> Person:
-    if not (np.isfinite(person.joints).all() and np.isfinite(person.confidence).all()):
+    if not (np.isfinite(person.joints).all() and np.isfinite(person.spread_mm).all()):
         raise InputError(
             f"the 3D estimate of person {person.id} is not finite: check the cameras (fx, fy, distortion, "
             "extrinsics with translations in mm) and depth_scale_mm"
@@ -76,8 +76,10 @@ def _checked(person: PersonResult) -> Person:
     return Person(
         id=person.id,
         joints=[
-            Joint(name=name, position=[float(x) for x in xyz], confidence=float(c))
-            for name, xyz, c in zip(JOINTS, person.joints, person.confidence, strict=True)
+            Joint(name=name, position=[float(x) for x in xyz], confidence=float(c), spread_mm=float(s))
+            for name, xyz, c, s in zip(
+                JOINTS, person.joints, person.confidence, person.spread_mm, strict=True
+            )
         ],
         views=[
             Support(view=v, box=[float(x) for x in person.boxes[v]], score=person.scores[v])

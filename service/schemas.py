@@ -134,6 +134,15 @@ class Joint(BaseModel):
     )
     confidence: float = Field(
         ...,
+        ge=0.0,
+        le=1.0,
+        description="the calibrated probability that the joint lies within 10 cm of the truth, in [0, 1]: "
+        "higher is more certain (fitted on held-out rendered scenes from the spread and the number of "
+        "supporting views; see docs/MODEL_CARD.md)",
+    )
+    spread_mm: float = Field(
+        ...,
+        ge=0.0,
         description="the network's spread of the joint's 3D estimate, in mm (the softmax-weighted RMS "
         "distance of the contributing lifted pixels from the estimate): smaller is more certain",
     )

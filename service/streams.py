@@ -224,7 +224,7 @@ class Frame:
         out = scene_out(result, scene, decode_ms)  # 422 on a non-finite estimate, before the tracker sees it
         stream = self.stream
         joints = np.array([p.joints for p in result.persons], np.float64).reshape(-1, len(JOINTS), 3)
-        spread = np.array([p.confidence for p in result.persons], np.float64).reshape(-1, len(JOINTS))
+        spread = np.array([p.spread_mm for p in result.persons], np.float64).reshape(-1, len(JOINTS))
         t_track = time.perf_counter()
         tracked = stream.tracker.update(joints, spread, self.time)
         track_ms = (time.perf_counter() - t_track) * 1e3

@@ -6,13 +6,14 @@ so a resumed run exports the whole of it). Only persons with a ``track_id`` are 
 the reference frame (camera 0's with MVOR's calibration), in MVOR's joint order (``posenet.skeleton.JOINTS``).
 
 - **EasyMocap:** ``DIR/sequence_S/keypoints3d/NNNNNN.json`` per frame (NNNNNN: the frame's ``frame_index``),
-  each ``[{"id": track_id, "keypoints3d": [[x, y, z, c], ...]}]`` with the 10 joints. ``c`` is 1 for every
-  joint (each one is estimated; EasyMocap reads 0 as missing): the service has no calibrated per-joint
-  confidence yet, and its spread in mm is not one. A frame with nobody tracked is an empty list. Note that
-  EasyMocap's body models expect their own joint sets (body25, ...): map MVOR's 10 joints before fitting.
+  each ``[{"id": track_id, "keypoints3d": [[x, y, z, c], ...]}]`` with the 10 joints. ``c`` is the service's
+  calibrated ``confidence`` of the raw joint in this frame (the probability that it lies within 10 cm, in
+  [0, 1]; EasyMocap weighs joints by it and reads 0 as missing). A frame with nobody tracked is an empty list.
+  Note that EasyMocap's body models expect their own joint sets (body25, ...): map MVOR's 10 joints before
+  fitting.
 - **CSV:** one row per joint: ``sequence, frame, timestamp_s, track, joint, x, y, z, confidence, spread_mm``.
-  ``confidence`` is left empty until the service gives a calibrated one; ``spread_mm`` is the pose network's
-  spread of the raw joint in this frame (larger is less certain).
+  ``confidence`` is that calibrated confidence and ``spread_mm`` the pose network's spread of the raw joint in
+  this frame (larger is less certain).
 """
 
 from __future__ import annotations
@@ -57,7 +58,13 @@ def export_easymocap(frames: list[TrackedFrame], folder: Path) -> int:
         path = Path(folder) / f"sequence_{frame.sequence}" / "keypoints3d" / f"{frame.frame_index:06d}.json"
         path.parent.mkdir(parents=True, exist_ok=True)
         people = [
-            {"id": p["track_id"], "keypoints3d": [[*j["position"], 1.0] for j in p["smoothed_joints"]]}
+            {
+                "id": p["track_id"],
+                "keypoints3d": [
+                    [*s["position"], raw["confidence"]]
+                    for s, raw in zip(p["smoothed_joints"], p["joints"], strict=True)
+                ],
+            }
             for p in frame.persons
         ]
         path.write_text(json.dumps(people))
@@ -76,7 +83,7 @@ def export_csv(frames: list[TrackedFrame], path: Path) -> int:
                 for smoothed, raw in zip(p["smoothed_joints"], p["joints"], strict=True):
                     writer.writerow(
                         [frame.sequence, frame.frame_index, frame.timestamp_s, p["track_id"], smoothed["name"],
-                         *smoothed["position"], "", raw["confidence"]]
+                         *smoothed["position"], raw["confidence"], raw["spread_mm"]]
                     )  # fmt: skip
                     rows += 1
     return rows

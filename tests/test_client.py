@@ -101,7 +101,7 @@ def test_detector_mode_predictions_get_ground_truth_ids_by_iou(tiny_mvor_dataset
     for n, pid in enumerate(reversed(gt_ids)):
         views = [{"view": v, "box": (np.asarray(b) + rng.normal(0, 3, 4)).tolist(), "score": 0.9}
                  for v, b in enumerate(sample.person_boxes(pid)) if b is not None]  # fmt: skip
-        joints = [{"name": "j", "position": [float(n), 0.0, 0.0], "confidence": 1.0}] * 10
+        joints = [{"name": "j", "position": [float(n), 0.0, 0.0], "confidence": 0.8, "spread_mm": 50.0}] * 10
         persons.append({"id": n, "joints": joints, "views": views})
     stray = {"view": 0, "box": [0, 0, 5, 5], "score": 0.6}  # overlaps no annotated box: no identity
     persons.append({"id": 9, "joints": persons[0]["joints"], "views": [stray]})
@@ -111,6 +111,7 @@ def test_detector_mode_predictions_get_ground_truth_ids_by_iou(tiny_mvor_dataset
     preds = predictions(lines, ds)
     expected = [(pid, float(n)) for n, pid in enumerate(reversed(gt_ids))]
     assert [(p["person_id"], p["keypoints3D"][0]) for p in preds] == expected
+    assert all(p["confidence"] == [0.8] * 10 and p["spread_mm"] == [50.0] * 10 for p in preds)
 
 
 def test_unreachable_server_and_missing_files_are_failures_not_lines(tiny_mvor_dataset, tmp_path):

@@ -19,9 +19,13 @@ import cv2
 import httpx
 import numpy as np
 import pytest
+import torch
 from conftest import write_tiny_mvor
 from service_harness import REPO_ROOT, Server, form_kwargs, raw_request, tiny_checkpoints
 
+from posenet.calibrate import write_section
+from posenet.calibration import Calibration
+from posenet.checkpoint import checkpoint_files
 from posenet.data.mvor import MvorDataset
 from posenet.skeleton import JOINTS
 from service.client import scene_request
@@ -29,6 +33,10 @@ from service.client import scene_request
 TOKEN = "s3cret"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
 MAX_BODY = 8 * 2**20
+# Written into the tiny pose checkpoint: the server must turn each spread into this confidence.
+CALIBRATION = Calibration(
+    "logistic", 100.0, [9.0, 8.0, 7.0, 6.0, 5.0, 4.0], [-1.5, -1.4, -1.3, -1.2, -1.1, -1.0], 0.7
+)
 
 
 @pytest.fixture(scope="module")
@@ -40,6 +48,7 @@ def tiny(tmp_path_factory):
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     pose, det = tiny_checkpoints(tmp_path_factory.mktemp("ckpt"))
+    write_section(checkpoint_files(pose)[1], CALIBRATION)
     env = {
         "ORPOSE_POSE_CHECKPOINT": str(pose),
         "ORPOSE_DETECTOR_CHECKPOINT": str(det),
@@ -87,7 +96,8 @@ def crowd(scene, files, persons, views=3, ids=True, source=(0, 1, 2, 0)):
 def check_person_shape(person: dict, width=640, height=480) -> None:
     assert [j["name"] for j in person["joints"]] == list(JOINTS)
     assert np.isfinite([j["position"] for j in person["joints"]]).all()
-    assert all(j["confidence"] >= 0 for j in person["joints"])
+    # confidence: calibrated P(error <= 10 cm); spread_mm: the network's spread (was "confidence" before)
+    assert all(0 <= j["confidence"] <= 1 and j["spread_mm"] > 0 for j in person["joints"])
     for support in person["views"]:
         x0, y0, x1, y1 = support["box"]
         assert x0 < x1 and y0 < y1
@@ -109,7 +119,13 @@ def test_health_ready_model_and_token(server):
     r = server.post("/scenes", headers=bare, files={"depth_0": b"x"})
     assert r.status_code == 401 and r.headers["www-authenticate"] == "Bearer"
     schema = server.get("/openapi.json").json()
-    assert "in mm in the reference frame" in json.dumps(schema["components"]["schemas"]["Joint"])
+    joint = schema["components"]["schemas"]["Joint"]
+    assert "in mm in the reference frame" in json.dumps(joint)
+    assert set(joint["required"]) >= {"confidence", "spread_mm"}
+    assert (
+        joint["properties"]["confidence"]["maximum"] == 1
+        and joint["properties"]["confidence"]["minimum"] == 0
+    )
     undocumented = [
         f"{name}.{prop}"
         for name, model in schema["components"]["schemas"].items()
@@ -131,6 +147,9 @@ def test_reference_box_mode_gives_each_annotated_person(server, tiny):
     assert sorted(p["id"] for p in out["persons"]) == sorted(sample.person_ids.tolist())
     for person in out["persons"]:
         check_person_shape(person)
+        spread = torch.tensor([[j["spread_mm"] for j in person["joints"]]], dtype=torch.float64)  # (1, J)
+        expected = CALIBRATION(spread, torch.tensor([len(person["views"])]))[0]
+        np.testing.assert_allclose([j["confidence"] for j in person["joints"]], expected, rtol=1e-6)
         sent = sample.person_boxes(person["id"])
         assert [s["view"] for s in person["views"]] == [v for v, b in enumerate(sent) if b is not None]
         for s in person["views"]:
@@ -404,7 +423,9 @@ def test_busy_models_get_503_and_a_gone_clients_work_stops(server, tiny):
     assert r.status_code == 200, r.text
     stopped = re.findall(r"its work stopped (\d+) ms later", server_log(server)[log_before:])
     assert stopped and int(stopped[0]) < 1000, server_log(server)[log_before:]
-    assert freed < 1.0, f"the inference worker was free {freed:.2f} s after the close (stopped {stopped[0]} ms)"
+    assert freed < 1.0, (
+        f"the inference worker was free {freed:.2f} s after the close (stopped {stopped[0]} ms)"
+    )
 
 
 @pytest.mark.skipif(shutil.which("curl") is None, reason="the example script needs curl on PATH")

@@ -223,7 +223,9 @@ def test_client_track_writes_tracks_and_both_exports_and_resumes(server, sequenc
         assert [p["id"] for p in people] == [p["track_id"] for p in tracked]
         for person, p in zip(people, tracked, strict=True):
             kp = np.array(person["keypoints3d"])
-            assert kp.shape == (len(JOINTS), 4) and (kp[:, 3] == 1).all()
+            assert kp.shape == (len(JOINTS), 4)  # c: the raw joint's calibrated confidence
+            np.testing.assert_allclose(kp[:, 3], [j["confidence"] for j in p["joints"]])
+            assert ((kp[:, 3] > 0) & (kp[:, 3] <= 1)).all()
             np.testing.assert_allclose(kp[:, :3], [j["position"] for j in p["smoothed_joints"]])
     # CSV: a row per tracked joint, the same numbers.
     with open(table, newline="") as f:
@@ -236,7 +238,10 @@ def test_client_track_writes_tracks_and_both_exports_and_resumes(server, sequenc
         for r in rows
     ]
     assert got == expected and len(got) == 2 * len(JOINTS) * (FRAMES - 2)
-    assert all(r["sequence"] == "1" and r["confidence"] == "" and float(r["spread_mm"]) > 0 for r in rows)
+    raw = [(j["confidence"], j["spread_mm"]) for line in lines for p in line["response"]["persons"]
+           if p["track_id"] is not None for j in p["joints"]]  # fmt: skip
+    assert [(float(r["confidence"]), float(r["spread_mm"])) for r in rows] == raw
+    assert all(r["sequence"] == "1" and 0 < float(r["confidence"]) <= 1 for r in rows)
 
     # Resume after a kill that lost the last two lines: the sequence is replayed and the ids go on as before.
     text = out.read_text().splitlines(keepends=True)
