@@ -7,6 +7,7 @@ Usage::
     pred.joints      # (P, J, 3) mm, reference (camera 0) frame
     pred.spread_mm   # (P, J) mm: the spread of each joint's 3D point cloud (see posenet.lifting)
     pred.confidence  # (P, J) in [0, 1]: calibrated P(error <= 10 cm) (see posenet.calibration)
+    heat = est.box_heatmaps(views, boxes)                          # boxes: V x (K_v, 4); see posenet.box_poses
 
 Any image size works: the input pipeline crops and resizes internally (:mod:`posenet.inputs`) and keeps the
 cameras right. Runs under ``torch.inference_mode``, at the precision chosen for this machine
@@ -23,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from posenet.box_poses import BoxHeatmaps, box_heatmaps
 from posenet.calibration import Calibration
 from posenet.cameras import Camera
 from posenet.checkpoint import load_checkpoint
@@ -165,3 +167,23 @@ class PoseEstimator:
                 scene.valid,
             )
         return pred
+
+    def box_heatmaps(
+        self, views: Sequence[tuple[np.ndarray | None, np.ndarray, Camera]], boxes: Sequence[np.ndarray]
+    ) -> BoxHeatmaps:
+        """The U-Net once on every box of a scene, before the boxes are grouped into persons.
+
+        Args:
+            views: as :meth:`predict`.
+            boxes: V arrays ``(K_v, 4)`` xyxy pixels of each view (K_v may be 0).
+
+        Returns:
+            a :class:`posenet.box_poses.BoxHeatmaps`: each box lifted alone (``single_view()``) or any grouping
+            of the boxes into persons (``estimate(members)``, equal to :meth:`predict` on those boxes).
+        """
+        for v, b in enumerate(boxes):
+            b = np.asarray(b, np.float32).reshape(-1, 4)
+            if not np.isfinite(b).all() or (b[:, 2] <= b[:, 0]).any() or (b[:, 3] <= b[:, 1]).any():
+                raise ValueError(f"view {v}: boxes must be finite xyxy with x1 > x0, y1 > y0")
+        with torch.inference_mode():
+            return box_heatmaps(self.model, list(views), boxes, self.model.config.inputs)

@@ -136,18 +136,30 @@ class PoseNet(nn.Module):
 
     def _joints(self, scene: SceneInput, heat: Tensor) -> PoseOutput:
         dev = heat.device
+        logits = self.logits(scene, heat)  # (P, V, J, M)
+        uv, depth, valid = scene.uv.to(dev), scene.depth.to(dev), scene.valid.to(dev)
+        return self.estimate(logits, uv, depth, valid, scene.cameras)
+
+    def logits(self, scene: SceneInput, heat: Tensor) -> Tensor:
+        """The U-Net's ``heat (P*V, J, h, w)`` of ``scene`` at its lifting points: ``(P, V, J, M)`` logits in
+        original pixels with un-flipped channels."""
         P, V = scene.has_box.shape
-        A, flipped = scene.A.to(dev), scene.flipped.to(dev)
+        A, flipped = scene.A.to(heat.device), scene.flipped.to(heat.device)
         if scene.mode == "full":
             heat = aug.inverse_warp(heat, A, scene.image_size)  # (P*V, J, H, W)
         heat = aug.unflip_channels(heat, flipped)
-        logits = heat.reshape(P, V, heat.shape[1], -1)  # (P, V, J, M)
-        uv, depth, valid = scene.uv.to(dev), scene.depth.to(dev), scene.valid.to(dev)
+        return heat.reshape(P, V, heat.shape[1], -1)  # (P, V, J, M)
+
+    def estimate(self, logits: Tensor, uv: Tensor, depth: Tensor, valid: Tensor, cameras) -> PoseOutput:
+        """Joints from logits ``(P, S, J, M)`` at points ``uv (P or 1, S, M, 2)``, ``depth (P or 1, S, M)``,
+        ``valid (P, S, M)`` seen by ``cameras`` of batch shape (S,) or (P, S), with this model's aggregation.
+
+        S is the views of a scene, or any set of (view, box) slots per person (``posenet.box_poses``)."""
         if self.config.aggregation == "2d":
-            est = lifting.fuse_2d(logits, uv, depth, valid, scene.cameras, self.config.eps)
+            est = lifting.fuse_2d(logits, uv, depth, valid, cameras, self.config.eps)
             uv_hat, view_valid = lifting.centre_of_mass_2d(logits, uv, valid, self.config.eps)
             return PoseOutput(est.joints, est.confidence, est.has_points, logits, uv_hat, view_valid)
-        points = lifting.lift(scene.cameras, uv, depth)  # (P or 1, V, M, 3)
+        points = lifting.lift(cameras, uv, depth)  # (P or 1, S, M, 3)
         est = lifting.aggregate(logits, points, valid, self.config.eps)
         return PoseOutput(est.joints, est.confidence, est.has_points, logits)
 

@@ -1,0 +1,182 @@
+"""The pose network's output per detected box, lifted box by box or regrouped into persons without running it again.
+
+The U-Net reads one (box, view) pair at a time: its input is that view's crop (or image) with that box's mask,
+whatever other boxes the person has. So the heatmaps of every box of a frame can be computed once, before the
+boxes are grouped into persons, and then
+
+- lifted **alone**: the softmax over that box's own pixels gives a single-view 3D skeleton per box (what the
+  skeleton matcher, ``detector.skeleton_matching``, compares across views);
+- **regrouped**: a person made of any set of boxes (one per view, or two boxes of one view that the detector
+  split) gets the usual softmax over all its boxes' points, exactly what ``PoseEstimator.predict`` gives for
+  those boxes, from the same heatmaps.
+
+Usage::
+
+    heat = estimator.box_heatmaps(views, boxes)       # boxes: V arrays (K_v, 4); the U-Net runs once here
+    alone = heat.single_view()                        # joints (N, J, 3) of the N = sum K_v boxes, view order
+    persons = heat.estimate(members)                  # members (P, S): box numbers of each person, -1 = none
+
+With flip averaging (``ModelConfig.flip_test``) both passes are kept and every estimate is the mean of the two,
+as ``posenet.model.average_flips`` does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from posenet import lifting
+from posenet.cameras import Camera
+from posenet.inputs import InputConfig, SceneInput, build_scene
+from posenet.lifting import JointEstimate
+
+Tensor = torch.Tensor
+
+
+@dataclass
+class BoxPass:
+    """One pass (plain or mirrored) of the U-Net over the N boxes, in the frame's box order.
+
+    logits (N, J, M) at the points uv (N, M, 2) with depth (N, M) and valid (N, M); points (N, M, 3) mm in the
+    reference frame, lifted once here for the 3D aggregation (None for the 2D baseline, which lifts per joint)."""
+
+    logits: Tensor
+    uv: Tensor
+    depth: Tensor
+    valid: Tensor
+    points: Tensor | None = None
+
+
+@dataclass
+class BoxHeatmaps:
+    """The per-box network outputs of one frame.
+
+    Attributes:
+        view: (N,) the view of each box; boxes are numbered in view order, then in their order within the view.
+        index: (N,) each box's index within its view.
+        cameras: batch shape (V,), of the images the points refer to.
+        passes: one :class:`BoxPass`, two with flip averaging.
+        estimate_fn: the model's ``PoseNet.estimate`` (the 2D baseline's fusion, when ``points`` is None).
+        eps: the model's logit for points that may not vote.
+    """
+
+    view: Tensor
+    index: Tensor
+    cameras: Camera
+    passes: list[BoxPass]
+    estimate_fn: object
+    eps: float = lifting.EPS_LOGIT
+
+    @property
+    def num_boxes(self) -> int:
+        return int(self.view.shape[0])
+
+    def estimate(self, members: Tensor | np.ndarray | Sequence[Sequence[int]]) -> JointEstimate:
+        """Joints of persons made of boxes.
+
+        Args:
+            members: (P, S) box numbers (0..N-1) of each person, -1 for unused slots; a box may serve several
+                persons, and a person may hold several boxes of one view.
+
+        Returns:
+            joints (P, J, 3) mm reference frame, confidence (P, J) mm, has_points (P,).
+        """
+        members = torch.as_tensor(np.asarray(members, np.int64) if not torch.is_tensor(members) else members)
+        if members.ndim != 2:
+            raise ValueError(f"members must be (P, S) box numbers, got shape {tuple(members.shape)}")
+        if members.numel() and int(members.max()) >= self.num_boxes:
+            raise ValueError(f"members name box {int(members.max())} of {self.num_boxes}")
+        size = (members >= 0).sum(1)  # (P,)
+        parts = []
+        # Persons are fused in buckets of equal box count, each padded only to its own count (one person with
+        # many boxes does not pad every other person's softmax).
+        for s in size.unique().tolist():
+            rows = torch.nonzero(size == s).squeeze(1)
+            part = members[rows]
+            part = part.gather(1, torch.argsort((part < 0).to(torch.int8), dim=1, stable=True))[
+                :, : max(s, 1)
+            ]
+            parts.append((rows, self._estimate(part)))
+        P, J = members.shape[0], self.passes[0].logits.shape[1]
+        out = JointEstimate(torch.zeros(P, J, 3), torch.zeros(P, J), torch.zeros(P, dtype=torch.bool))
+        for rows, est in parts:
+            out.joints[rows], out.confidence[rows], out.has_points[rows] = (
+                est.joints.cpu().float(),
+                est.confidence.cpu().float(),
+                est.has_points.cpu(),
+            )
+        return out
+
+    def _estimate(self, members: Tensor) -> JointEstimate:
+        """:meth:`estimate` of persons padded to one slot count S: members (P, S)."""
+        used = members >= 0  # (P, S)
+        slot = members.clamp_min(0)  # (P, S)
+        cams = self.cameras[self.view[slot]] if self.passes[0].points is None else None  # batch (P, S)
+        outs = []
+        with torch.inference_mode():
+            for p in self.passes:
+                valid = p.valid[slot] & used.unsqueeze(-1)  # (P, S, M)
+                if p.points is not None:  # the 3D aggregation, from the points lifted once per box
+                    outs.append(lifting.aggregate(p.logits[slot], p.points[slot], valid, self.eps))
+                else:
+                    outs.append(self.estimate_fn(p.logits[slot], p.uv[slot], p.depth[slot], valid, cams))
+        joints = torch.stack([o.joints for o in outs]).mean(0)
+        confidence = torch.stack([o.confidence for o in outs]).mean(0)
+        has_points = torch.stack([o.has_points for o in outs]).all(0)
+        return JointEstimate(joints, confidence, has_points)
+
+    def single_view(self) -> JointEstimate:
+        """Each box lifted alone: joints (N, J, 3), confidence (N, J), has_points (N,)."""
+        return self.estimate(torch.arange(self.num_boxes)[:, None])
+
+
+def slot_layout(boxes: Sequence[np.ndarray]) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Lay the boxes of V views out as a scene of K = max K_v "persons": slot (k, v) holds box k of view v.
+
+    Returns ``(boxes (K, V, 4), has_box (K, V), view (N,), index (N,))`` with N = sum K_v in view order.
+    """
+    per_view = [np.asarray(b, np.float32).reshape(-1, 4) for b in boxes]
+    counts = [len(b) for b in per_view]
+    K, V = max(counts, default=0), len(per_view)
+    dense = torch.zeros(K, V, 4)
+    has = torch.zeros(K, V, dtype=torch.bool)
+    for v, b in enumerate(per_view):  # one copy per view
+        dense[: len(b), v] = torch.from_numpy(b)
+        has[: len(b), v] = True
+    view = torch.cat([torch.full((c,), v, dtype=torch.long) for v, c in enumerate(counts)])
+    index = torch.cat([torch.arange(c) for c in counts])
+    return dense, has, view, index
+
+
+def box_heatmaps(model, views: list, boxes: Sequence[np.ndarray], inputs: InputConfig) -> BoxHeatmaps:
+    """Run ``model`` (a ``PoseNet``) once on every box of a frame; see the module docstring.
+
+    Args:
+        views: V tuples ``(color or None, depth, Camera)`` as ``posenet.inputs.build_scene`` takes them.
+        boxes: V arrays ``(K_v, 4)`` xyxy pixels of those views (K_v may be 0).
+    """
+    if len(boxes) != len(views):
+        raise ValueError(f"got {len(boxes)} box lists for {len(views)} views")
+    dense, has, view, index = slot_layout(boxes)
+    mirrors = (False, True) if model.config.flip_test else (False,)
+    scenes: list[SceneInput] = [build_scene(views, dense, has, inputs, mirror=m) for m in mirrors]
+    heats = model.heatmaps(scenes)  # the only U-Net pass: the N boxes (x 2 with flips)
+    passes = []
+    for scene, heat in zip(scenes, heats, strict=True):
+        logits = model.logits(scene, heat)  # (K, V, J, M)
+        K, V = has.shape
+        M = logits.shape[-1]
+        uv = scene.uv.to(logits.device).expand(K, V, M, 2)
+        depth = scene.depth.to(logits.device).expand(K, V, M)
+        valid = scene.valid.to(logits.device)
+        box = BoxPass(logits[index, view], uv[index, view], depth[index, view], valid[index, view])
+        if model.config.aggregation == "3d":
+            if scene.uv.shape[0] == 1:  # full mode: the views' pixel grids, shared by the boxes of a view
+                box.points = lifting.lift(scene.cameras, scene.uv, scene.depth)[0, view]  # (N, M, 3)
+            else:  # crop mode: each box's own crop pixels
+                box.points = lifting.lift(scene.cameras[view], box.uv[None], box.depth[None])[0]  # (N, M, 3)
+        passes.append(box)
+    return BoxHeatmaps(view, index, scenes[0].cameras, passes, model.estimate, model.config.eps)
