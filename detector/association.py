@@ -1,9 +1,12 @@
 """How well boxes are grouped into persons across views, as in the paper's evaluation of its matcher.
 
     python -m detector.association --data DIR --annotations A.json [--predictions BOXES.json] [--days 4]
+        [--matcher centres|skeletons] [--pose-checkpoint CKPT]
 
 Without ``--predictions`` the matcher groups the reference boxes; with it, the detected boxes (score at least
-``--score-threshold``). For every annotated person (``person_id >= 0``) in every frame:
+``--score-threshold``). ``--matcher centres`` is the paper's 3D box-centre matcher (``detector.matching``);
+``--matcher skeletons`` groups boxes by the single-view skeletons of the pose network (the shipped weights, or
+``--pose-checkpoint``; ``detector.skeleton_matching``), and needs the colour images when that network reads them. For every annotated person (``person_id >= 0``) in every frame:
 - the paper's score: match persons to groups by IoU averaged over the V views (IoU 0 where the person or the
   group has no box), one to one (Hungarian); ``mean_iou`` averages the matched scores over persons.
 - counts: in each view, detected boxes are paired with annotated boxes (Hungarian, IoU >= 0.5). A person is
@@ -24,8 +27,11 @@ from scipy.optimize import linear_sum_assignment
 from tqdm import tqdm
 
 from detector.matching import Group, match_boxes
+from detector.skeleton_matching import MATCHERS, group_with_skeletons
 from posenet.boxes import boxes_of_person, coco_to_xyxy, dense_boxes, iou_xyxy, match_persons, person_ids
 
+# As service.pipeline.PipelineConfig.max_match_combinations: frames beyond it are refused, not enumerated.
+PAIRS_LIMIT = 300_000
 COUNTS = ("persons", "found", "complete", "missed", "split", "merged", "groups")
 
 
@@ -48,7 +54,7 @@ def frame_association(
     # Which group holds each predicted box: owner[v][k].
     owner = [np.full(len(b), -1) for b in pred_boxes]
     for gi, g in enumerate(groups):
-        for v, k in enumerate(g.indices):
+        for v, k in [*enumerate(g.indices), *g.extra]:
             if k >= 0:
                 owner[v][k] = gi
     # Per view, pair detections with annotated boxes; record the group of each person's detected boxes.
@@ -109,11 +115,18 @@ def evaluate_association(
     score_threshold: float = 0.5,
     threshold_mm: float = 750.0,
     progress: bool = True,
+    matcher: str = "centres",
+    pose=None,
 ) -> dict:
     """Association metrics over ``samples`` (``Sample``s with depth); see the module docstring.
 
-    ``predictions`` None groups the reference boxes; else the COCO results' boxes of each view.
+    ``predictions`` None groups the reference boxes; else the COCO results' boxes of each view. ``matcher``
+    "skeletons" groups them with ``pose`` (a ``posenet.infer.PoseEstimator``) instead of the box centres.
     """
+    if matcher not in MATCHERS:
+        raise ValueError(f"matcher must be one of {MATCHERS}, got {matcher!r}")
+    if matcher == "skeletons" and pose is None:
+        raise ValueError("the skeleton matcher needs the pose network: pass pose=PoseEstimator(...)")
     detected = None if predictions is None else results_by_image(predictions, score_threshold)
     totals = dict.fromkeys(COUNTS, 0)
     totals["iou_sum"] = 0.0
@@ -129,7 +142,11 @@ def evaluate_association(
             if v.depth is None:
                 raise ValueError(f"frame {sample.id} has no depth image: load the dataset with depth")
             depths.append(v.depth)
-        groups = match_boxes(pred, depths, sample.cameras, threshold_mm)
+        if matcher == "skeletons":
+            views = [(v.color, v.depth, v.camera) for v in sample.views]
+            groups = group_with_skeletons(pose, views, pred, max_combinations=PAIRS_LIMIT)[0]
+        else:
+            groups = match_boxes(pred, depths, sample.cameras, threshold_mm)
         for k, val in frame_association(gt_boxes, gt_ids, pred, groups).items():
             totals[k] += val
     n = max(totals["persons"], 1)
@@ -152,17 +169,37 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--days", type=int, nargs="+", help="only these recording days")
     parser.add_argument("--score-threshold", type=float, default=0.5, help="lowest detection score used")
     parser.add_argument("--threshold-mm", type=float, default=750.0, help="the matcher's t (paper: 75 cm)")
+    parser.add_argument(
+        "--matcher", choices=MATCHERS, default="centres",
+        help="centres: the paper's 3D box centres; skeletons: each box's single-view skeleton (pose network)",
+    )  # fmt: skip
+    parser.add_argument("--pose-checkpoint", help="the skeleton matcher's pose weights (default: shipped)")
+    parser.add_argument("--threads", type=int, help="torch threads for the skeleton matcher's pose network")
     parser.add_argument("--out", help="also write the metrics to this json file")
     args = parser.parse_args(argv)
 
     from posenet.data.mvor import MvorDataset
 
-    samples = MvorDataset(args.data, args.annotations, subsample=1, modalities=("depth",), days=args.days)
+    pose, modalities = None, ("depth",)
+    if args.matcher == "skeletons":
+        import torch
+
+        from posenet.infer import PoseEstimator
+
+        if args.threads:
+            torch.set_num_threads(args.threads)
+        pose = PoseEstimator.from_checkpoint(args.pose_checkpoint, threads=args.threads)
+        if pose.model.config.inputs.modality != "depth":
+            modalities = ("color", "depth")
+    samples = MvorDataset(args.data, args.annotations, subsample=1, modalities=modalities, days=args.days)
     predictions = None
     if args.predictions:
         predictions = json.loads(Path(args.predictions).read_text())
-    metrics = evaluate_association(samples, predictions, args.score_threshold, args.threshold_mm)
+    metrics = evaluate_association(
+        samples, predictions, args.score_threshold, args.threshold_mm, matcher=args.matcher, pose=pose
+    )
     metrics["boxes"] = "detected" if predictions is not None else "reference"
+    metrics["matcher"] = args.matcher
     print(json.dumps(metrics, indent=2))
     if args.out:
         Path(args.out).write_text(json.dumps(metrics, indent=2))

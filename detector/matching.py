@@ -37,11 +37,15 @@ class Group:
         none.
         centre: (3,) mean of the member boxes' 3D centres, mm, reference frame (NaN when no member has depth).
         mean_distance: mean pairwise distance between the member centres, mm (0 for a single box).
+        extra: ``(view, index)`` of further boxes of the person in views where it already has one (the skeleton
+            matcher merges a person that the detector split or duplicated within a view; the centre matcher
+            never does).
     """
 
     indices: tuple[int, ...]
     centre: np.ndarray
     mean_distance: float
+    extra: tuple[tuple[int, int], ...] = ()
 
     @property
     def size(self) -> int:
@@ -144,8 +148,15 @@ def valid_combinations(
     Returns:
         Per size m = 2, 3, ...: ``(members (P, m), mean_distance (P,))``, members sorted by view.
     """
-    n = len(centres)
     dist = np.linalg.norm(centres[:, None] - centres[None, :], axis=-1)  # (N, N), NaN for boxes without depth
+    return combinations_within(dist, view, threshold_mm)
+
+
+def combinations_within(
+    dist: np.ndarray, view: np.ndarray, threshold_mm: float
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """:func:`valid_combinations` for any symmetric distance ``dist (N, N)`` between items (NaN never matches)."""
+    n = len(dist)
     close = np.nan_to_num(dist, nan=np.inf) <= threshold_mm
     close &= view[:, None] < view[None, :]  # one box per view, members in increasing view order
     out = []
@@ -162,6 +173,31 @@ def valid_combinations(
         m = members.shape[1]
         out.append((members, total / (m * (m - 1) / 2)))
     return out
+
+
+def combination_bound(dist: np.ndarray, view: np.ndarray, num_views: int, threshold_mm: float) -> float:
+    """An upper bound on the combinations :func:`combinations_within` enumerates, from the close pairs.
+
+    A combination is grown from its first item b in later views only, each view adding nothing or one item
+    close to b; so at most prod over later views v of (1 + items of v close to b) combinations start at b.
+    """
+    close = np.nan_to_num(dist, nan=np.inf) <= threshold_mm
+    per_view = close.astype(np.float64) @ np.eye(num_views)[view]  # (N, V) close items in each view
+    later = view[:, None] < np.arange(num_views)[None, :]  # (N, V)
+    return float(np.prod(np.where(later, 1 + per_view, 1), axis=1).sum())
+
+
+def choose_greedily(combos: list[tuple[np.ndarray, np.ndarray]], n: int) -> list[tuple[np.ndarray, float]]:
+    """The paper's rule: combinations with more members first, then the closest first, each item used once;
+    the items left over become single-item groups (in their order). Returns ``(members, mean_distance)``."""
+    used = np.zeros(n, bool)
+    chosen: list[tuple[np.ndarray, float]] = []
+    for members, mean in reversed(combos):  # larger combinations first
+        for i in np.argsort(mean, kind="stable"):  # then the closest first
+            if not used[members[i]].any():
+                used[members[i]] = True
+                chosen.append((members[i], float(mean[i])))
+    return chosen + [(np.array([b]), 0.0) for b in np.flatnonzero(~used)]
 
 
 def match_boxes(
@@ -188,15 +224,7 @@ def match_boxes(
     starts = np.concatenate([[0], np.cumsum([len(np.asarray(b).reshape(-1, 4)) for b in boxes])])
     local = np.arange(n) - starts[view]  # index of each box within its view
 
-    combos = valid_combinations(centres, view, threshold_mm)
-    used = np.zeros(n, bool)
-    chosen: list[tuple[np.ndarray, float]] = []
-    for members, mean in reversed(combos):  # larger combinations first
-        for i in np.argsort(mean, kind="stable"):  # then the closest first
-            if not used[members[i]].any():
-                used[members[i]] = True
-                chosen.append((members[i], float(mean[i])))
-    chosen += [(np.array([b]), 0.0) for b in np.flatnonzero(~used)]
+    chosen = choose_greedily(valid_combinations(centres, view, threshold_mm), n)
     if not chosen:
         return []
     # All group centres at once: the mean of the members' centres that have depth.

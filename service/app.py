@@ -38,7 +38,7 @@ async def lifespan(app: FastAPI):
                 settings.detector_checkpoint,
                 settings.device,
                 settings.load_detector,
-                PipelineConfig(max_pose_pixels=settings.max_pose_pixels),
+                PipelineConfig(max_pose_pixels=settings.max_pose_pixels, matcher=settings.matcher),
                 settings.precision,
                 settings.backend,
                 settings.threads,

@@ -54,6 +54,14 @@ class PipelineConfig:
     # The service's cost bound (ORPOSE_MAX_POSE_PIXELS): persons x views x network-input pixels (x 2 with flip
     # averaging) per frame. None: no bound beyond max_persons (offline evaluation).
     max_pose_pixels: int | None = None
+    # How boxes without ids are grouped across views (ORPOSE_MATCHER): "centres", the paper's 3D box-centre
+    # matcher, or "skeletons", each box's single-view skeleton from the pose network (detector.skeleton_matching;
+    # the U-Net still runs once per box). Centres stays the default until the skeletons are measured on day 4.
+    matcher: str = "centres"
+
+    def __post_init__(self) -> None:
+        if self.matcher not in ("centres", "skeletons"):
+            raise ValueError(f"matcher must be 'centres' or 'skeletons', got {self.matcher!r}")
 
 
 @dataclass
@@ -183,19 +191,12 @@ class ScenePipeline:
 
     # ----------------------------------------------------------------------------------------- stages
     def _combination_bound(self, boxes: list[np.ndarray], views: list[FrameView]) -> float:
-        """An upper bound on the combinations the matcher will enumerate, from the pairwise-close box centres.
-
-        A combination is grown from its first box b in later views only, each view adding nothing or one box
-        close to b; so at most prod over later views v of (1 + boxes of v close to b) combinations start at b.
-        """
-        from detector.matching import box_centres_3d
+        """An upper bound on the combinations the centre matcher will enumerate (``combination_bound``)."""
+        from detector.matching import box_centres_3d, combination_bound
 
         centres, view = box_centres_3d(boxes, [v.depth for v in views], [v.camera for v in views])
         dist = np.linalg.norm(centres[:, None] - centres[None, :], axis=-1)  # (N, N), NaN without depth
-        close = np.nan_to_num(dist, nan=np.inf) <= self.config.match_threshold_mm
-        per_view = close.astype(np.float64) @ np.eye(len(views))[view]  # (N, V) close boxes in each view
-        later = view[:, None] < np.arange(len(views))[None, :]  # (N, V)
-        return float(np.prod(np.where(later, 1 + per_view, 1), axis=1).sum())
+        return combination_bound(dist, view, len(views), self.config.match_threshold_mm)
 
     def _person_limit(self, num_views: int) -> tuple[int, str]:
         """The most persons a frame of ``num_views`` views may run through the pose network, and why."""
@@ -262,33 +263,39 @@ class ScenePipeline:
         elif len(boxes) != len(views):
             raise ValueError(f"boxes has {len(boxes)} entries for {len(views)} views")
         t0 = time.perf_counter()
+        limit, why = self._person_limit(len(views))
+        heat, members = None, None
         if person_ids is not None:
             ids, groups = group_by_ids(person_ids)
+        elif any(len(b) for b in boxes) and self.config.matcher == "skeletons":
+            boxes, scores = self._fit_boxes(boxes, scores, limit, why)
+            heat, timings["match"], groups, members = self._match_skeletons(boxes, views)
+            timings["pose"] += _ms(t0) - timings["match"]
+            ids = list(range(len(groups)))
         elif any(len(b) for b in boxes):
             groups = self._match(boxes, views)
             ids = list(range(len(groups)))
         else:
             ids, groups = [], []
-        limit, why = self._person_limit(len(views))
         if len(groups) > limit:
             if scores[0] is None:
                 raise ValueError(f"the boxes make {len(groups)} persons, more than {why}")
             # Detector mode: the matcher lists multi-view groups first; the best-supported persons are kept.
             ids, groups = ids[:limit], groups[:limit]
-        timings["match"] = _ms(t0)
+            members = None if members is None else members[:limit]
+        if heat is None:
+            timings["match"] = _ms(t0)
         persons = [
-            PersonResult(
-                pid,
-                np.zeros(0),
-                np.zeros(0),
-                [None if k < 0 else boxes[v][k] for v, k in enumerate(group)],
-                [None if k < 0 or scores[v] is None else float(scores[v][k]) for v, k in enumerate(group)],
-            )
+            PersonResult(pid, np.zeros(0), np.zeros(0), *self._person_boxes(group, boxes, scores))
             for pid, group in zip(ids, groups, strict=True)
         ]
         t0 = time.perf_counter()
         if persons:
-            prediction = self.pose.predict(list(views), [p.boxes for p in persons])
+            # The skeleton matcher's heatmaps: fuse its groups without another U-Net pass.
+            if heat is not None:
+                prediction = heat.estimate(members)
+            else:
+                prediction = self.pose.predict(list(views), [p.boxes for p in persons])
             joints = np.asarray(prediction.joints, dtype=np.float64)  # (P, J, 3)
             spread = torch.as_tensor(prediction.spread_mm, dtype=torch.float64).cpu()  # (P, J) mm
             support = torch.tensor([len(p.support) for p in persons])  # (P,)
@@ -299,8 +306,49 @@ class ScenePipeline:
             # A person whose boxes hold no valid depth has no lifted points: its joints mean nothing.
             has_points = np.asarray(prediction.has_points, dtype=bool)  # (P,)
             persons = [p for p, ok in zip(persons, has_points, strict=True) if ok]
-        timings["pose"] = _ms(t0)
+        timings["pose"] += _ms(t0)
         return SceneResult("detector" if scores[0] is not None else "reference_boxes", persons, timings)
+
+    @staticmethod
+    def _person_boxes(group, boxes, scores) -> tuple[list, list]:
+        """Per view the person's box and detector score: ``group`` is per view a box index or -1, or a
+        ``detector.matching.Group`` (whose extra boxes in a view widen its box to their hull, best score)."""
+        if isinstance(group, list):
+            return (
+                [None if k < 0 else boxes[v][k] for v, k in enumerate(group)],
+                [None if k < 0 or scores[v] is None else float(scores[v][k]) for v, k in enumerate(group)],
+            )
+        from detector.skeleton_matching import group_boxes
+
+        per_view = group_boxes([group], boxes)[0]
+        best: list[float | None] = [None] * len(boxes)
+        for v, k in [*enumerate(group.indices), *group.extra]:
+            if k >= 0 and scores[v] is not None:
+                best[v] = max(best[v] or 0.0, float(scores[v][k]))
+        return per_view, best
+
+    def _fit_boxes(self, boxes, scores, limit: int, why: str) -> tuple[list, list]:
+        """The skeleton matcher runs the U-Net on every box, laid out as max_v K_v persons: keep that within the
+        person limit (detector mode: each view's best-scored boxes; reference boxes: refuse)."""
+        if max(len(b) for b in boxes) <= limit:
+            return boxes, scores
+        if scores[0] is None:
+            raise ValueError(f"a view holds {max(len(b) for b in boxes)} boxes, more persons than {why}")
+        keep = [np.sort(np.argsort(-s, kind="stable")[:limit]) for s in scores]
+        boxes = [b[k] for b, k in zip(boxes, keep, strict=True)]
+        return boxes, [s[k] for s, k in zip(scores, keep, strict=True)]
+
+    def _match_skeletons(self, boxes: list[np.ndarray], views: list[FrameView]):
+        """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
+
+        Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds spent after
+        the U-Net, the ``detector.matching.Group`` s and their ``(P, S)`` box numbers."""
+        from detector.skeleton_matching import match_heatmaps, members_of
+
+        heat = self.pose.box_heatmaps(list(views), boxes)
+        t0 = time.perf_counter()
+        groups = match_heatmaps(heat, views, boxes, max_combinations=self.config.max_match_combinations)
+        return heat, _ms(t0), groups, members_of(groups, boxes)
 
     # ----------------------------------------------------------------------------------------- offline
     def run_sample(self, sample: Sample, reference_boxes: bool = True) -> tuple[SceneResult, list[dict]]:

@@ -1,0 +1,236 @@
+"""Group boxes across views by their single-view 3D skeletons: association that uses the pose network.
+
+The centre matcher (``detector.matching``) lifts one depth per box, the median over the box's central region; a
+box that is a little off centre lifts it onto a neighbour or the wall, and the person is split or merged. The pose
+network already reads every box on its own (``posenet.box_poses``), so each box also gives a 3D skeleton from
+that view alone, from the depth at the pixels the network believes are the joints. Two boxes of one person in
+two views give two skeletons that agree joint by joint, wherever their box centres fall.
+
+The rule, for the N boxes of a frame:
+
+1. **Distance.** Between two boxes, the median over the joints of the distance between their single-view
+   skeletons (robust to a few joints lifted onto the wrong surface); NaN when either box had no valid depth.
+2. **One person, two boxes in one view** (the detector split or duplicated it): boxes of the same view whose
+   skeletons lie within ``same_view_mm`` are one unit. The unit keeps all its boxes: their heatmaps all vote in
+   the person's softmax (a duplicate adds little, a split adds the half the other box missed), and the person's
+   box in that view is their hull.
+3. **Across views.** Units of distinct views are grouped by the paper's greedy rule (``detector.matching``):
+   combinations whose members are pairwise within ``threshold_mm`` (the distance between units: the closest pair
+   of their boxes), more members first, then the closest. Box centres farther apart than ``centre_gate_mm`` never
+   match: a sanity bound, wider than the centre matcher's 75 cm because the centre is what fails.
+4. Units left over are persons seen in one view.
+
+The skeletons are lifted from the heatmaps that the pose network computes anyway; the grouped boxes are then fused
+from those same heatmaps (``BoxHeatmaps.estimate``), so the U-Net runs once per box in either matcher.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+
+from detector.matching import (
+    Group,
+    _valid_median,
+    box_centres_3d,
+    choose_greedily,
+    combination_bound,
+    combinations_within,
+)
+from posenet.cameras import Camera
+
+MATCHERS = ("centres", "skeletons")
+
+
+@dataclass
+class SkeletonMatchConfig:
+    # Two single-view skeletons of one person differ by both views' depth-direction errors (single-view MPJPE
+    # on the twin is about 13 cm), neighbours at an OR table stand 50-80 cm apart: 40 cm sits between (not yet
+    # tuned by measurement; see docs/detector.md for the command that measures it).
+    threshold_mm: float = 400.0
+    # Box centres farther apart than this never match (the centre matcher's t is 75 cm; it is the centres that
+    # fail, so this is only a bound against two far-apart persons whose skeletons agree by chance).
+    centre_gate_mm: float = 1500.0
+    # Two boxes of one view whose skeletons agree this well read the same person (a duplicate gives the same
+    # skeleton to a few cm); two distinct people are never this close at most joints.
+    same_view_mm: float = 250.0
+
+
+def skeleton_distances(joints: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """Robust distance between every two skeletons: the median over the joints valid in both.
+
+    Args:
+        joints: (N, J, 3) mm, reference frame; ok: (N, J) joints with valid depth.
+
+    Returns:
+        (N, N) mm, NaN where two skeletons share no valid joint.
+    """
+    joints, ok = np.asarray(joints, np.float64), np.asarray(ok, bool)
+    if joints.ndim != 3 or joints.shape[-1] != 3 or ok.shape != joints.shape[:2]:
+        raise ValueError(f"joints must be (N, J, 3) and ok (N, J), got {joints.shape}, {ok.shape}")
+    n, J = ok.shape
+    d = np.linalg.norm(joints[:, None] - joints[None, :], axis=-1)  # (N, N, J)
+    d[~(ok[:, None] & ok[None, :])] = np.nan
+    return _valid_median(d.reshape(n * n, J)).reshape(n, n)
+
+
+def _units(dist: np.ndarray, view: np.ndarray, same_view_mm: float) -> np.ndarray:
+    """(N,) unit label of each box: boxes of one view linked by skeletons within ``same_view_mm``."""
+    link = (np.nan_to_num(dist, nan=np.inf) <= same_view_mm) & (view[:, None] == view[None, :])
+    _, labels = connected_components(link, directed=False)
+    # Number the units by their first box, so that the boxes' order (view order) is kept.
+    _, first = np.unique(labels, return_index=True)
+    order = np.argsort(np.argsort(first))
+    return order[labels]
+
+
+def group_skeletons(
+    view: np.ndarray,
+    joints: np.ndarray,
+    ok: np.ndarray,
+    centres: np.ndarray,
+    num_views: int,
+    config: SkeletonMatchConfig | None = None,
+    max_combinations: float | None = None,
+) -> list[tuple[np.ndarray, float]]:
+    """Group N boxes into persons by their skeletons (see the module docstring).
+
+    Args:
+        view: (N,) view of each box; joints: (N, J, 3) single-view skeletons, mm, reference frame; ok: (N, J)
+            joints with valid depth; centres: (N, 3) 3D box centres, NaN where unknown (they pass the gate).
+        max_combinations: refuse (ValueError) frames whose boxes would make more combinations than this.
+
+    Returns:
+        Per person ``(members, mean_distance)``: the box numbers (sorted), and the mean distance between its
+        views' units (0 for one view). Multi-view persons first (more views, then closer, first), then the rest
+        in box order.
+    """
+    config = config or SkeletonMatchConfig()
+    view = np.asarray(view, np.int64)
+    n = len(view)
+    if n == 0:
+        return []
+    dist = skeleton_distances(joints, ok)  # (N, N)
+    gap = np.linalg.norm(centres[:, None] - centres[None, :], axis=-1)  # (N, N), NaN without a centre
+    allowed = np.nan_to_num(dist, nan=np.inf) <= config.threshold_mm
+    allowed &= ~(gap > config.centre_gate_mm)  # NaN passes
+    unit = _units(dist, view, config.same_view_mm)  # (N,)
+    U = int(unit.max()) + 1
+    # Distance between units: their closest allowed pair of boxes (min over the members, via a scatter).
+    pair = np.where(allowed, dist, np.inf)
+    unit_dist = np.full((U, U), np.inf)
+    np.minimum.at(unit_dist, (unit[:, None].repeat(n, 1), unit[None, :].repeat(n, 0)), pair)
+    unit_view = np.zeros(U, np.int64)
+    unit_view[unit] = view
+    if max_combinations is not None:
+        bound = combination_bound(unit_dist, unit_view, num_views, config.threshold_mm)
+        if bound > max_combinations:
+            raise ValueError(
+                f"the boxes are too crowded to group across views (up to {bound:.3g} combinations of "
+                f"skeletons within {config.threshold_mm:g} mm, more than {max_combinations:g}); give "
+                "person_ids with the boxes, or fewer boxes"
+            )
+    chosen = choose_greedily(combinations_within(unit_dist, unit_view, config.threshold_mm), U)
+    members = [np.flatnonzero(np.isin(unit, units)) for units, _ in chosen]
+    return [(m, mean) for m, (_, mean) in zip(members, chosen, strict=True)]
+
+
+def match_skeletons(
+    boxes: Sequence[np.ndarray],
+    depths: Sequence[np.ndarray],
+    cameras: Camera | Sequence[Camera],
+    joints: np.ndarray,
+    ok: np.ndarray,
+    config: SkeletonMatchConfig | None = None,
+    max_combinations: float | None = None,
+) -> list[Group]:
+    """Group the boxes of V views into persons by their single-view skeletons.
+
+    Args:
+        boxes: V arrays ``(K_v, 4)`` xyxy pixels; depths, cameras: as ``detector.matching.match_boxes``.
+        joints: (N, J, 3) the single-view skeleton of each of the N = sum K_v boxes, in view order
+            (``BoxHeatmaps.single_view``); ok: (N, J) its joints with valid depth.
+
+    Returns:
+        :class:`detector.matching.Group` s in :func:`group_skeletons`' order; in a view where a person holds
+        several boxes, ``indices`` names the first and ``extra`` the others.
+    """
+    centres, view = box_centres_3d(boxes, depths, cameras)
+    V = len(boxes)
+    starts = np.concatenate([[0], np.cumsum([len(np.asarray(b).reshape(-1, 4)) for b in boxes])])
+    local = np.arange(len(view)) - starts[view]
+    groups = []
+    for members, mean in group_skeletons(view, joints, ok, centres, V, config, max_combinations):
+        indices = np.full(V, -1)
+        extra = []
+        for b in members:  # a handful of boxes per person
+            if indices[view[b]] < 0:
+                indices[view[b]] = local[b]
+            else:
+                extra.append((int(view[b]), int(local[b])))
+        with np.errstate(invalid="ignore"):
+            has = ~np.isnan(centres[members, 0])
+            centre = centres[members][has].mean(0) if has.any() else np.full(3, np.nan)
+        groups.append(Group(tuple(int(i) for i in indices), centre, mean, tuple(extra)))
+    return groups
+
+
+def members_of(groups: Sequence[Group], boxes: Sequence[np.ndarray]) -> np.ndarray:
+    """``(P, S)`` box numbers (view order, as ``BoxHeatmaps``) of each group's boxes, -1 padded."""
+    starts = np.concatenate([[0], np.cumsum([len(np.asarray(b).reshape(-1, 4)) for b in boxes])])
+    rows = [[int(starts[v] + k) for v, k in [*enumerate(g.indices), *g.extra] if k >= 0] for g in groups]
+    out = np.full((len(rows), max((len(r) for r in rows), default=0)), -1, np.int64)
+    for p, r in enumerate(rows):
+        out[p, : len(r)] = r
+    return out
+
+
+def group_boxes(groups: Sequence[Group], boxes: Sequence[np.ndarray]) -> list[list[np.ndarray | None]]:
+    """Per group, per view: its box there, the hull of its boxes where it holds several, or None."""
+    out = []
+    for g in groups:
+        per_view: list[np.ndarray | None] = [
+            None if k < 0 else np.asarray(boxes[v][k], np.float64) for v, k in enumerate(g.indices)
+        ]
+        for v, k in g.extra:
+            b = np.asarray(boxes[v][k], np.float64)
+            per_view[v] = np.concatenate(
+                [np.minimum(per_view[v][:2], b[:2]), np.maximum(per_view[v][2:], b[2:])]
+            )
+        out.append(per_view)
+    return out
+
+
+def match_heatmaps(
+    heat,
+    views: Sequence[tuple[np.ndarray | None, np.ndarray, Camera]],
+    boxes: Sequence[np.ndarray],
+    config: SkeletonMatchConfig | None = None,
+    max_combinations: float | None = None,
+) -> list[Group]:
+    """Lift each box of ``heat`` (a ``posenet.box_poses.BoxHeatmaps`` of ``boxes``) alone and group the boxes.
+
+    Fuse the groups from the same heatmaps with ``heat.estimate(members_of(groups, boxes))``."""
+    alone = heat.single_view()
+    joints = alone.joints.float().cpu().numpy()  # (N, J, 3)
+    ok = np.isfinite(joints).all(-1) & alone.has_points.cpu().numpy()[:, None]  # (N, J)
+    return match_skeletons(
+        boxes, [v[1] for v in views], [v[2] for v in views], joints, ok, config, max_combinations
+    )
+
+
+def group_with_skeletons(
+    estimator,
+    views: Sequence[tuple[np.ndarray | None, np.ndarray, Camera]],
+    boxes: Sequence[np.ndarray],
+    config: SkeletonMatchConfig | None = None,
+    max_combinations: float | None = None,
+):
+    """Run the pose network (a ``posenet.infer.PoseEstimator``) once on every box, then :func:`match_heatmaps`.
+
+    Returns ``(groups, heat)``."""
+    heat = estimator.box_heatmaps(views, boxes)
+    return match_heatmaps(heat, views, boxes, config, max_combinations), heat

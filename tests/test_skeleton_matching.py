@@ -1,0 +1,238 @@
+"""Association by single-view skeletons: per-box heatmaps reused for fusion, the grouping rule, the matcher option."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+from conftest import write_tiny_mvor
+
+from detector.association import evaluate_association
+from detector.matching import match_boxes
+from detector.skeleton_matching import group_skeletons, members_of, skeleton_distances
+from posenet.data.mvor import MvorDataset
+from posenet.infer import PoseEstimator
+from posenet.inputs import InputConfig
+from posenet.model import ModelConfig, PoseNet
+from service.pipeline import FrameView, PipelineConfig, ScenePipeline
+
+TEMPLATE = np.array(
+    [[0, -700, 0], [0, -550, 0], [180, -500, 0], [-180, -500, 0], [120, 0, 0], [-120, 0, 0],
+     [250, -260, 40], [-250, -260, 40], [270, -60, 160], [-270, -60, 160]], np.float64,
+)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    data = write_tiny_mvor(tmp_path_factory.mktemp("tiny"), days=(1,), frames_per_day=2)
+    return data, MvorDataset(data.root, data.gt)
+
+
+def estimator(**model) -> PoseEstimator:
+    torch.manual_seed(0)
+    cfg = ModelConfig(precision="fp32", **model)  # float32: batched and single runs agree to rounding
+    return PoseEstimator(PoseNet(cfg), {"model": dataclasses.asdict(cfg)})
+
+
+def frame(sample):
+    views = [FrameView(v.color, v.depth, v.camera) for v in sample.views]
+    boxes = [np.asarray(v.boxes, np.float32).reshape(-1, 4) for v in sample.views]
+    return views, boxes
+
+
+MODELS = {
+    "crop": {},
+    "crop+flip": {"flip_test": True},
+    "2d": {"aggregation": "2d"},
+    "full": {"inputs": InputConfig(mode="full", image_size=(64, 48), train_crop=(64, 48), source_size=None)},
+}
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_fusion_from_box_heatmaps_equals_predict(tiny, model):
+    """Grouped boxes fused from the per-box heatmaps give what a fresh ``predict`` on those boxes gives, and a
+    box lifted alone gives the skeleton of a person seen in that view only."""
+    est = estimator(**MODELS[model])
+    views, boxes = frame(tiny[1][0])
+    heat = est.box_heatmaps(views, boxes)
+    starts = np.cumsum([0] + [len(b) for b in boxes])
+    # Every box alone, and two groupings across views (one box per view; one view missing).
+    alone = heat.single_view()
+    assert alone.joints.shape == (heat.num_boxes, 10, 3) and alone.has_points.all()
+    for n in range(heat.num_boxes):
+        v = int(heat.view[n])
+        person = [[boxes[v][n - starts[v]] if w == v else None for w in range(3)]]
+        ref = est.predict(views, person)
+        np.testing.assert_allclose(alone.joints[n], ref.joints[0], atol=1e-2)
+        np.testing.assert_allclose(alone.confidence[n], ref.spread_mm[0], atol=1e-2)
+    members = np.array([[starts[0], starts[1], starts[2]], [starts[0] + 1, starts[1] + 1, -1]])
+    fused = heat.estimate(members)
+    persons = [[boxes[v][m - starts[v]] if m >= 0 else None for v, m in enumerate(row)] for row in members]
+    ref = est.predict(views, persons)
+    np.testing.assert_allclose(fused.joints, ref.joints, atol=1e-2)
+    np.testing.assert_allclose(fused.confidence, ref.spread_mm, atol=1e-2)
+    # A box lent to two views of the fusion is not the same as one view: the test can fail.
+    assert not np.allclose(fused.joints[0], alone.joints[starts[0]], atol=1.0)
+
+
+def test_box_heatmaps_run_the_unet_once_per_box(tiny):
+    est = estimator()
+    views, boxes = frame(tiny[1][0])
+    calls = []
+    unet = est.model.unet
+    handle = unet.register_forward_hook(lambda _m, args, _out: calls.append(args[0].shape[0]))
+    try:
+        heat = est.box_heatmaps(views, boxes)
+        heat.single_view()
+        heat.estimate(np.arange(heat.num_boxes)[None, :])
+    finally:
+        handle.remove()
+    assert calls == [sum(len(b) for b in boxes)]
+
+
+def _scene(rng, noise_mm=40.0):
+    """Synthetic single-view skeletons: per box (view, person, skeleton, centre)."""
+    at = {
+        "A": [0, 0, 3000],
+        "B": [900, 0, 3200],
+        "C": [-900, 0, 2800],
+        "D": [0, 0, 4200],
+        "E": [1800, 0, 2500],
+    }
+    # (view, person): A in 3 views and duplicated in view 1; B in views 0 and 2, split in two boxes in view 0;
+    # C in view 2 only; D in views 0 and 1 with a box centre lifted 1.2 m onto the wall in view 1 (the centre
+    # matcher splits it); E in views 1 and 2.
+    boxes = [(0, "A"), (0, "B"), (0, "B"), (0, "D"), (1, "A"), (1, "A"), (1, "D"), (1, "E"),
+             (2, "A"), (2, "B"), (2, "C"), (2, "E")]  # fmt: skip
+    joints, centres = [], []
+    for i, (v, p) in enumerate(boxes):
+        skeleton = TEMPLATE + at[p] + rng.normal(0, noise_mm, TEMPLATE.shape)
+        skeleton[rng.integers(10)] += [0, 0, 900]  # one joint lifted onto the background
+        joints.append(skeleton)
+        centre = np.asarray(at[p], float) + rng.normal(0, 50, 3) + [0, -300, 0]
+        if (v, p) == (1, "D"):
+            centre += [0, 0, 1200]
+        centres.append(centre)
+        if i == 2:
+            joints[-1][4:] += [0, 0, 150]  # the lower half of a split person is read less well
+    order = rng.permutation(len(boxes))
+    order = order[np.argsort([boxes[i][0] for i in order], kind="stable")]  # shuffled within each view
+    view = np.array([boxes[i][0] for i in order])
+    who = [boxes[i][1] for i in order]
+    return view, np.stack(joints)[order], np.stack(centres)[order], who
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_grouping_recovers_persons_split_duplicated_and_single_view(seed):
+    rng = np.random.default_rng(seed)
+    view, joints, centres, who = _scene(rng)
+    ok = np.ones(joints.shape[:2], bool)
+    groups = group_skeletons(view, joints, ok, centres, 3)
+    found = sorted(sorted(who[i] for i in m) for m, _ in groups)
+    assert found == [["A", "A", "A", "A"], ["B", "B", "B"], ["C"], ["D", "D"], ["E", "E"]]
+    assert [len(set(view[m])) for m, _ in groups] == [3, 2, 2, 2, 1]  # multi-view first
+    # The paper's centre matcher on the same boxes splits D, whose centre fell on the wall in view 1.
+    from detector.matching import choose_greedily, valid_combinations
+
+    by_centre = choose_greedily(valid_combinations(centres, view, 750.0), len(view))
+    assert any(sorted(who[i] for i in m) == ["D"] for m, _ in by_centre)
+
+
+def test_skeleton_distance_is_a_median_over_joints_valid_in_both():
+    a = np.zeros((1, 5, 3))
+    b = np.zeros((1, 5, 3))
+    b[0, :, 0] = [10, 20, 30, 5000, 5000]
+    ok = np.ones((2, 5), bool)
+    d = skeleton_distances(np.concatenate([a, b]), ok)
+    assert d[0, 1] == d[1, 0] == 30 and d[0, 0] == 0
+    ok[1, :3] = False  # only the far joints remain
+    assert skeleton_distances(np.concatenate([a, b]), ok)[0, 1] == 5000
+    ok[0, 3:] = False  # nothing valid in both
+    assert np.isnan(skeleton_distances(np.concatenate([a, b]), ok)[0, 1])
+    # A box without any valid joint stays alone.
+    groups = group_skeletons(np.array([0, 1]), np.concatenate([a, a]), np.array([[True] * 5, [False] * 5]),
+                             np.zeros((2, 3)), 2)  # fmt: skip
+    assert [list(m) for m, _ in groups] == [[0], [1]]
+
+
+def test_centres_stay_the_default_and_give_todays_groups(tiny):
+    est = estimator()
+    pipe = ScenePipeline(est)
+    assert PipelineConfig().matcher == "centres"
+    with pytest.raises(ValueError, match="matcher"):
+        PipelineConfig(matcher="nearest")
+    sample = tiny[1][0]
+    views, boxes = frame(sample)
+    result = pipe.run(views, boxes)
+    groups = match_boxes(boxes, [v.depth for v in views], [v.camera for v in views])
+    ref = est.predict(
+        views, [[None if k < 0 else boxes[v][k] for v, k in enumerate(g.indices)] for g in groups]
+    )
+    assert [p.support for p in result.persons] == [
+        [v for v, k in enumerate(g.indices) if k >= 0] for g in groups
+    ]
+    np.testing.assert_array_equal(np.stack([p.joints for p in result.persons]), ref.joints.numpy())
+
+
+def test_pipeline_with_the_skeleton_matcher(tiny):
+    """Each person's joints are the fusion of the boxes it was given; timings keep their three stages; the
+    association evaluation runs with either matcher."""
+    est = estimator()
+    pipe = ScenePipeline(est, config=PipelineConfig(matcher="skeletons"))
+    sample = tiny[1][0]
+    views, boxes = frame(sample)
+    result = pipe.run(views, boxes)
+    assert result.persons and set(result.timings) == {"detect", "match", "pose"}
+    assert sum(len(p.support) for p in result.persons) <= sum(len(b) for b in boxes)
+    single = 0
+    for person in result.persons:
+        if all(b is None or (boxes[v] == b).all(1).any() for v, b in enumerate(person.boxes)):
+            single += 1  # one detected box per view (a person merged within a view reports the boxes' hull)
+            alone = est.predict(views, [person.boxes])
+            np.testing.assert_allclose(person.joints, alone.joints[0], atol=1e-2)
+    assert single > 0
+    for matcher in ("centres", "skeletons"):
+        m = evaluate_association(tiny[1], matcher=matcher, pose=est, progress=False)
+        assert m["found"] + m["split"] + m["merged"] + m["missed"] == m["persons"] > 0
+    with pytest.raises(ValueError, match="pose network"):
+        evaluate_association(tiny[1], matcher="skeletons", progress=False)
+
+
+def test_members_of_lists_every_box_of_a_group():
+    from detector.matching import Group
+
+    boxes = [np.zeros((2, 4)), np.zeros((1, 4)), np.zeros((3, 4))]
+    groups = [Group((1, -1, 0), np.zeros(3), 0.0, ((2, 2),)), Group((-1, 0, -1), np.zeros(3), 0.0)]
+    np.testing.assert_array_equal(members_of(groups, boxes), [[1, 3, 5], [2, -1, -1]])
+
+
+def test_served_detector_mode_with_the_skeleton_matcher(tmp_path, tiny):
+    """A real uvicorn server with ORPOSE_MATCHER=skeletons answers a detector-mode frame; /model is unchanged."""
+    import json
+
+    import httpx
+    from service_harness import Server, tiny_checkpoints
+
+    from service.client import scene_request
+
+    pose, det = tiny_checkpoints(tmp_path)
+    env = {
+        "ORPOSE_POSE_CHECKPOINT": str(pose),
+        "ORPOSE_DETECTOR_CHECKPOINT": str(det),
+        "ORPOSE_MATCHER": "skeletons",
+    }
+    data, ds = tiny
+    scene, files = scene_request(ds[0], data.root, reference_boxes=False)
+    with Server(env) as url, httpx.Client(base_url=url, timeout=120) as client:
+        r = client.post("/scenes", data={"scene": json.dumps(scene)}, files=files)
+        assert r.status_code == 200, r.text
+        out = r.json()
+        assert out["mode"] == "detector" and out["timings"]["detect"] > 0 and out["persons"]
+        for person in out["persons"]:
+            assert np.isfinite([j["position"] for j in person["joints"]]).all()
+            assert all(0 <= s["score"] <= 1 for s in person["views"])
+        bad = {"ORPOSE_MATCHER": "nearest"}
+    with pytest.raises(RuntimeError, match="matcher"), Server({**env, **bad}, startup_s=60):
+        pass
