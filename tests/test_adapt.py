@@ -287,7 +287,7 @@ def test_the_result_loads_like_any_pose_checkpoint(tiny, tmp_path, monkeypatch):
     sample = MvorDataset(tiny["target"], tiny["no3d"], poses=False)[0]
     views = [(v.color, v.depth, v.camera) for v in sample.views]
     boxes = [sample.person_boxes(0)]
-    pred = PoseEstimator.from_checkpoint(run).predict(views, boxes)
+    pred = PoseEstimator.from_checkpoint(run, precision="fp32").predict(views, boxes)
     assert pred.joints.shape == (1, 10, 3) and torch.isfinite(pred.joints).all()
     # the service: ORPOSE_POSE_CHECKPOINT=RUN
     from service.pipeline import ScenePipeline

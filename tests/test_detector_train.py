@@ -15,11 +15,11 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from detector import predict as predict_cli  # noqa: E402
 from detector import train as train_cli  # noqa: E402
-from posenet.boxes import xyxy_to_coco  # noqa: E402
 from detector.data import DetectionDataset, collate, load_records  # noqa: E402
 from detector.evaluate import coco_ap, evaluate_file  # noqa: E402
 from detector.infer import PersonDetector  # noqa: E402
 from detector.model import build_detector, preset  # noqa: E402
+from posenet.boxes import xyxy_to_coco  # noqa: E402
 
 W, H = 128, 96
 

@@ -95,7 +95,7 @@ def test_client_posts_a_recording_as_the_service_expects(recording, monkeypatch)
     assert files[5][1][1] == (recording / "cam10/depth/000000.png").read_bytes()
     seen = {}
 
-    def fake_run(dataset, root, out, cfg):
+    def fake_run(dataset, root, out, cfg, sequences=None):
         seen.update(ids=dataset.ids, root=root)
         return {
             "frames": len(dataset),

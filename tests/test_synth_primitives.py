@@ -143,8 +143,8 @@ def test_zbuffer_keeps_the_nearest_surface_and_shell_fills_the_rest():
 def test_box_geometry_matches_the_project_camera_model():
     import torch
 
-    from posenet.cameras import Camera
     from posenet.boxes import box_iou
+    from posenet.cameras import Camera
     from posenet.data.synth.boxes import covered, project_boxes
     from posenet.data.synth.rig import random_rig
 
