@@ -56,6 +56,10 @@ class TrainConfig:
     # Start from these weights (a run folder, checkpoint folder or NAME.safetensors, e.g. the shipped
     # posenet/weights/default.safetensors) with a fresh optimiser and schedule; the model config must match.
     init: str | None = None
+    # Datasets watched during training, never trained on and never used to choose a checkpoint: "DIR" (its
+    # --holdout-day) or "DIR:D,D" (those days), e.g. the unseen look's day 4 beside the held-out day of --data.
+    # Each is evaluated whenever the held-out day is, logged as watch_NAME_cm (overall MPJPE).
+    watch: list[str] = field(default_factory=list)
     holdout_day: int | None = (
         None  # the fold's test day (validation); None trains on every day, no validation
     )
@@ -214,6 +218,25 @@ def validate(model: PoseNet, annotations: dict, dataset, days) -> dict:
     }
 
 
+def watch_sets(specs: list[str], holdout_day: int | None, subsample: int, modalities) -> list[tuple]:
+    """``(name, annotations, dataset, days)`` for each ``--watch DIR[:D,D]``, read without training on it."""
+    from posenet.data.mvor import MvorDataset, load_annotations
+
+    sets = []
+    for spec in specs:
+        root, _, days_text = spec.partition(":")
+        days = [int(d) for d in days_text.split(",") if d] or ([holdout_day] if holdout_day is not None else [])
+        if not days:
+            raise ValueError(f"--watch {spec}: give its days (DIR:4) or a --holdout-day")
+        annotations = load_annotations(Path(root) / "annotations.json")
+        have = MvorDataset(None, annotations, modalities=()).days
+        if missing := sorted(set(days) - set(have)):
+            raise ValueError(f"--watch {spec}: day(s) {missing} not among the dataset's days {sorted(have)}")
+        dataset = MvorDataset(root, annotations, subsample, modalities, days=days)
+        sets.append((Path(root).name, annotations, dataset, days))
+    return sets
+
+
 def load_init_weights(model: PoseNet, path: str) -> None:
     """Load the weights of checkpoint ``path`` into ``model``; a clear error when they do not fit its config."""
     from safetensors.torch import load_file
@@ -278,6 +301,7 @@ def train(cfg: TrainConfig) -> dict:
     val_set = None
     if cfg.holdout_day is not None:
         val_set = MvorDataset(cfg.data, annotations, cfg.subsample, modalities, days=[cfg.holdout_day])
+    watched = watch_sets(cfg.watch, cfg.holdout_day, cfg.subsample, modalities)
     cfg.data_description = {
         "annotations": str(ann_path),
         "train_days": train_days,
@@ -286,6 +310,7 @@ def train(cfg: TrainConfig) -> dict:
         "extra_data": list(cfg.extra_data),
         "extra_train_frames": extra_frames,
         "val_frames": 0 if val_set is None else len(val_set),
+        "watched": {name: {"days": days, "frames": len(ds)} for name, _, ds, days in watched},
     }
     if cfg.cache and cfg.num_workers:
         raise ValueError("--cache keeps frames in this process: use it with --num-workers 0")
@@ -396,6 +421,8 @@ def train(cfg: TrainConfig) -> dict:
             last_val_minute = schedule.elapsed / 60.0
             metrics = validate(model, annotations, val_set, [cfg.holdout_day])
             record.update({k: v for k, v in metrics.items() if k != "result"})
+            for name, watch_annotations, watch_set, days in watched:
+                record[f"watch_{name}_cm"] = validate(model, watch_annotations, watch_set, days)["val_mpjpe_cm"]
         if rank == 0:
             score = record.get("val_mpjpe_cm")
             improved = score is not None and score < best
@@ -445,6 +472,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument(
         "--holdout-day", type=int, help="the fold's held-out day, used for validation (default: none)"
+    )
+    g.add_argument(
+        "--watch",
+        nargs="+",
+        metavar="DIR[:D,D]",
+        help="also evaluate on these datasets whenever the held-out day is evaluated (logged as watch_NAME_cm; "
+        "never trained on, never used to choose a checkpoint), e.g. --watch data/mvor_alt:4 for the unseen look",
     )
     g.add_argument(
         "--out", required=True, help="run folder: config.json, log.jsonl, last/ and best/ checkpoints"

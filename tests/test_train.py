@@ -77,7 +77,8 @@ def test_cli_train_resume_predict(tiny, tmp_path):
     root, ann = tiny
     run = tmp_path / "run"
     base = ["--data", str(root), "--holdout-day", "2", "--out", str(run)]
-    assert train_main([*base, *TINY[:-2], "--epochs", "1", "--val-every", "1"]) == 0
+    watch = ["--watch", f"{root}:2"]  # the held-out day itself, watched: the same figure under its own key
+    assert train_main([*base, *TINY[:-2], "--epochs", "1", "--val-every", "1", *watch]) == 0
     for ckpt in ("last", "best"):
         assert (run / ckpt / "model.safetensors").is_file()
         saved = json.loads((run / ckpt / "config.json").read_text())
@@ -86,6 +87,9 @@ def test_cli_train_resume_predict(tiny, tmp_path):
     assert train_main([*base, "--resume", "--epochs", "2"]) == 0
     log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
     assert [r["epoch"] for r in log] == [1, 2] and all("val_mpjpe_cm" in r for r in log)
+    assert all(r[f"watch_{root.name}_cm"] == r["val_mpjpe_cm"] for r in log)  # the watch survives --resume
+    with pytest.raises(ValueError, match=r"--watch .*:9: day\(s\) \[9\] not among"):
+        train_main([*base[:-1], str(tmp_path / "w"), *TINY[:-2], "--epochs", "1", "--watch", f"{root}:9"])
     pred = tmp_path / "pred.json"
     args = ["--data", str(root), "--annotations", str(ann), "--checkpoint", str(run / "best"), "--days", "2"]
     assert predict_main([*args, "--out", str(pred)]) == 0
