@@ -225,7 +225,9 @@ def watch_sets(specs: list[str], holdout_day: int | None, subsample: int, modali
     sets = []
     for spec in specs:
         root, _, days_text = spec.partition(":")
-        days = [int(d) for d in days_text.split(",") if d] or ([holdout_day] if holdout_day is not None else [])
+        days = [int(d) for d in days_text.split(",") if d] or (
+            [holdout_day] if holdout_day is not None else []
+        )
         if not days:
             raise ValueError(f"--watch {spec}: give its days (DIR:4) or a --holdout-day")
         annotations = load_annotations(Path(root) / "annotations.json")
@@ -422,7 +424,9 @@ def train(cfg: TrainConfig) -> dict:
             metrics = validate(model, annotations, val_set, [cfg.holdout_day])
             record.update({k: v for k, v in metrics.items() if k != "result"})
             for name, watch_annotations, watch_set, days in watched:
-                record[f"watch_{name}_cm"] = validate(model, watch_annotations, watch_set, days)["val_mpjpe_cm"]
+                record[f"watch_{name}_cm"] = validate(model, watch_annotations, watch_set, days)[
+                    "val_mpjpe_cm"
+                ]
         if rank == 0:
             score = record.get("val_mpjpe_cm")
             improved = score is not None and score < best
