@@ -2,6 +2,8 @@
 
     python -m detector.association --data DIR --annotations A.json [--predictions BOXES.json] [--days 4]
         [--matcher centres|skeletons] [--pose-checkpoint CKPT]
+    python -m detector.association ... --matcher skeletons --skeleton-mm 300 400 500 --same-view-mm 150 250
+        # a sweep of the skeleton matcher's thresholds: one table row per combination, the network run once
 
 Without ``--predictions`` the matcher groups the reference boxes; with it, the detected boxes (score at least
 ``--score-threshold``). ``--matcher centres`` is the paper's 3D box-centre matcher (``detector.matching``);
@@ -18,6 +20,7 @@ Without ``--predictions`` the matcher groups the reference boxes; with it, the d
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from collections import defaultdict
 from pathlib import Path
@@ -27,7 +30,7 @@ from scipy.optimize import linear_sum_assignment
 from tqdm import tqdm
 
 from detector.matching import Group, match_boxes
-from detector.skeleton_matching import MATCHERS, group_with_skeletons
+from detector.skeleton_matching import MATCHERS, SkeletonMatchConfig, match_heatmaps
 from posenet.boxes import boxes_of_person, coco_to_xyxy, dense_boxes, iou_xyxy, match_persons, person_ids
 
 # As service.pipeline.PipelineConfig.max_match_combinations: frames beyond it are refused, not enumerated.
@@ -117,19 +120,25 @@ def evaluate_association(
     progress: bool = True,
     matcher: str = "centres",
     pose=None,
-) -> dict:
+    skeleton_configs: list[SkeletonMatchConfig] | None = None,
+) -> dict | list[dict]:
     """Association metrics over ``samples`` (``Sample``s with depth); see the module docstring.
 
     ``predictions`` None groups the reference boxes; else the COCO results' boxes of each view. ``matcher``
-    "skeletons" groups them with ``pose`` (a ``posenet.infer.PoseEstimator``) instead of the box centres.
+    "skeletons" groups them with ``pose`` (a ``posenet.infer.PoseEstimator``) instead of the box centres, with
+    the default :class:`SkeletonMatchConfig`; given ``skeleton_configs``, with each of them from the same
+    heatmaps (the pose network runs once per frame), and the result is one metrics dict per config.
     """
     if matcher not in MATCHERS:
         raise ValueError(f"matcher must be one of {MATCHERS}, got {matcher!r}")
     if matcher == "skeletons" and pose is None:
         raise ValueError("the skeleton matcher needs the pose network: pass pose=PoseEstimator(...)")
+    configs = skeleton_configs or [SkeletonMatchConfig()]
+    if skeleton_configs and matcher != "skeletons":
+        raise ValueError("skeleton_configs are thresholds of the skeleton matcher: pass matcher='skeletons'")
     detected = None if predictions is None else results_by_image(predictions, score_threshold)
-    totals = dict.fromkeys(COUNTS, 0)
-    totals["iou_sum"] = 0.0
+    runs = len(configs) if matcher == "skeletons" else 1
+    totals = [{**dict.fromkeys(COUNTS, 0), "iou_sum": 0.0} for _ in range(runs)]
     for sample in tqdm(samples, desc="associate", unit="frame", disable=not progress):
         gt_boxes = [np.asarray(v.boxes, np.float64).reshape(-1, 4) for v in sample.views]
         gt_ids = [np.asarray(v.box_person_ids) for v in sample.views]
@@ -144,16 +153,19 @@ def evaluate_association(
             depths.append(v.depth)
         if matcher == "skeletons":
             views = [(v.color, v.depth, v.camera) for v in sample.views]
-            groups = group_with_skeletons(pose, views, pred, max_combinations=PAIRS_LIMIT)[0]
+            heat = pose.box_heatmaps(views, pred)
+            groupings = [match_heatmaps(heat, views, pred, c, max_combinations=PAIRS_LIMIT) for c in configs]
         else:
-            groups = match_boxes(pred, depths, sample.cameras, threshold_mm)
-        for k, val in frame_association(gt_boxes, gt_ids, pred, groups).items():
-            totals[k] += val
-    n = max(totals["persons"], 1)
-    totals["mean_iou"] = round(totals.pop("iou_sum") / n, 4)
-    for k in ("found", "complete", "missed", "split", "merged"):
-        totals[f"{k}_rate"] = round(totals[k] / n, 4)
-    return totals
+            groupings = [match_boxes(pred, depths, sample.cameras, threshold_mm)]
+        for total, groups in zip(totals, groupings, strict=True):
+            for k, val in frame_association(gt_boxes, gt_ids, pred, groups).items():
+                total[k] += val
+    for total in totals:
+        n = max(total["persons"], 1)
+        total["mean_iou"] = round(total.pop("iou_sum") / n, 4)
+        for k in ("found", "complete", "missed", "split", "merged"):
+            total[f"{k}_rate"] = round(total[k] / n, 4)
+    return totals if skeleton_configs else totals[0]
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -175,6 +187,26 @@ def main(argv: list[str] | None = None) -> dict:
     )  # fmt: skip
     parser.add_argument("--pose-checkpoint", help="the skeleton matcher's pose weights (default: shipped)")
     parser.add_argument("--threads", type=int, help="torch threads for the skeleton matcher's pose network")
+    sweep = parser.add_argument_group(
+        "skeleton matcher thresholds (several values: every combination is scored from the same heatmaps)"
+    )
+    default = SkeletonMatchConfig()
+    sweep.add_argument(
+        "--skeleton-mm",
+        type=float,
+        nargs="+",
+        default=[default.threshold_mm],
+        help="across views: single-view skeletons within this median joint distance",
+    )
+    sweep.add_argument(
+        "--same-view-mm",
+        type=float,
+        nargs="+",
+        default=[default.same_view_mm],
+        help="within a view: boxes whose skeletons lie this close are one person",
+    )
+    sweep.add_argument("--centre-gate-mm", type=float, nargs="+", default=[default.centre_gate_mm],
+                       help="box centres farther apart than this never match")  # fmt: skip
     parser.add_argument("--out", help="also write the metrics to this json file")
     args = parser.parse_args(argv)
 
@@ -195,12 +227,35 @@ def main(argv: list[str] | None = None) -> dict:
     predictions = None
     if args.predictions:
         predictions = json.loads(Path(args.predictions).read_text())
+    configs = [
+        SkeletonMatchConfig(threshold_mm=t, centre_gate_mm=g, same_view_mm=s)
+        for t in args.skeleton_mm
+        for s in args.same_view_mm
+        for g in args.centre_gate_mm
+    ]
+    sweeping = args.matcher == "skeletons" and len(configs) > 1
+    if len(configs) > 1 and not sweeping:
+        parser.error("several thresholds are a sweep of the skeleton matcher: add --matcher skeletons")
     metrics = evaluate_association(
-        samples, predictions, args.score_threshold, args.threshold_mm, matcher=args.matcher, pose=pose
-    )
-    metrics["boxes"] = "detected" if predictions is not None else "reference"
-    metrics["matcher"] = args.matcher
-    print(json.dumps(metrics, indent=2))
+        samples, predictions, args.score_threshold, args.threshold_mm, matcher=args.matcher, pose=pose,
+        skeleton_configs=configs if sweeping else None,
+    )  # fmt: skip
+    boxes = "detected" if predictions is not None else "reference"
+    if sweeping:
+        print(
+            "| across views, mm | same view, mm | centre gate, mm | found | split | merged | missed | mean IoU |"
+        )
+        print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+        for c, m in zip(configs, metrics, strict=True):
+            m.update(boxes=boxes, matcher=args.matcher, config=dataclasses.asdict(c))
+            print(f"| {c.threshold_mm:g} | {c.same_view_mm:g} | {c.centre_gate_mm:g} | {m['found_rate']:.3f} | "
+                  f"{m['split_rate']:.3f} | {m['merged_rate']:.3f} | {m['missed_rate']:.3f} | {m['mean_iou']:.3f} |")  # fmt: skip
+    else:
+        metrics["boxes"] = boxes
+        metrics["matcher"] = args.matcher
+        if args.matcher == "skeletons":
+            metrics["config"] = dataclasses.asdict(configs[0])
+        print(json.dumps(metrics, indent=2))
     if args.out:
         Path(args.out).write_text(json.dumps(metrics, indent=2))
     return metrics

@@ -220,17 +220,3 @@ def match_heatmaps(
     return match_skeletons(
         boxes, [v[1] for v in views], [v[2] for v in views], joints, ok, config, max_combinations
     )
-
-
-def group_with_skeletons(
-    estimator,
-    views: Sequence[tuple[np.ndarray | None, np.ndarray, Camera]],
-    boxes: Sequence[np.ndarray],
-    config: SkeletonMatchConfig | None = None,
-    max_combinations: float | None = None,
-):
-    """Run the pose network (a ``posenet.infer.PoseEstimator``) once on every box, then :func:`match_heatmaps`.
-
-    Returns ``(groups, heat)``."""
-    heat = estimator.box_heatmaps(views, boxes)
-    return match_heatmaps(heat, views, boxes, config, max_combinations), heat

@@ -11,7 +11,7 @@ from conftest import write_tiny_mvor
 
 from detector.association import evaluate_association
 from detector.matching import match_boxes
-from detector.skeleton_matching import group_skeletons, members_of, skeleton_distances
+from detector.skeleton_matching import SkeletonMatchConfig, group_skeletons, members_of, skeleton_distances
 from posenet.data.mvor import MvorDataset
 from posenet.infer import PoseEstimator
 from posenet.inputs import InputConfig
@@ -198,6 +198,16 @@ def test_pipeline_with_the_skeleton_matcher(tiny):
         assert m["found"] + m["split"] + m["merged"] + m["missed"] == m["persons"] > 0
     with pytest.raises(ValueError, match="pose network"):
         evaluate_association(tiny[1], matcher="skeletons", progress=False)
+    # A sweep scores every config from the same heatmaps: each row equals a run with that config alone.
+    configs = [
+        SkeletonMatchConfig(threshold_mm=t, same_view_mm=s) for t in (1.0, 400.0) for s in (1.0, 250.0)
+    ]
+    rows = evaluate_association(
+        tiny[1], matcher="skeletons", pose=est, skeleton_configs=configs, progress=False
+    )
+    assert rows[3] == evaluate_association(tiny[1], matcher="skeletons", pose=est, progress=False)
+    # 1 mm across views groups no two views: nobody is found whole where a person has boxes in several views
+    assert rows[0]["split"] >= rows[3]["split"] and rows[0]["groups"] >= rows[3]["groups"]
 
 
 def test_members_of_lists_every_box_of_a_group():
