@@ -45,12 +45,23 @@ def _cloud(pred: PosePrediction, cameras, top: int = 300) -> tuple[np.ndarray, n
     return pts[keep].numpy(), joint[keep].numpy(), wt[keep].numpy()
 
 
+def draw_box(ax, box, colour, label: str) -> None:
+    """One person box ``(x0, y0, x1, y1)`` (pixels) on image axes, with ``label`` above its top-left corner (inside
+    it when the box touches the image's top)."""
+    from matplotlib.patches import Rectangle
+
+    x0, y0, x1, y1 = box
+    ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ec=colour, lw=2))
+    inside = y0 < 0.06 * ax.get_ylim()[0]  # near the image's top (ylim: from the bottom row up to -0.5)
+    y, va = (y0 + 3, "top") if inside else (y0 - 3, "baseline")
+    ax.text(x0 + 3 * inside, y, label, color=colour, fontsize=8, va=va)
+
+
 def draw(sample, pred: PosePrediction, boxes, person_ids, person: int, out: str | Path, mode: str) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
 
     V = len(sample.views)
     fig = plt.figure(figsize=(4 * max(V, 3), 11))
@@ -63,10 +74,7 @@ def draw(sample, pred: PosePrediction, boxes, person_ids, person: int, out: str 
         ax.imshow(img, cmap=None if view.color is not None else "viridis")
         for p in range(len(person_ids)):
             if boxes[p][v] is not None:
-                x0, y0, x1, y1 = boxes[p][v]
-                c = PERSON_COLOURS[p % len(PERSON_COLOURS)]
-                ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ec=c, lw=2))
-                ax.text(x0, y0 - 3, f"id {person_ids[p]}", color=c, fontsize=8)
+                draw_box(ax, boxes[p][v], PERSON_COLOURS[p % len(PERSON_COLOURS)], f"id {person_ids[p]}")
         ax.set_title(f"view {v} ({view.file_name})", fontsize=8)
         ax.axis("off")
     # 2. heatmaps of one person in its largest view
