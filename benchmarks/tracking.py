@@ -2,6 +2,7 @@
 
     python -m posenet.data.synth --out data/seq_eval --sequence --frames 120 --persons 3 --rig mvor --look twin
     python benchmarks/tracking.py --data data/seq_eval --detections runs/seq_eval_detections.jsonl
+    python benchmarks/tracking.py --data data/seq_eval --served runs/seq_eval_tracks.jsonl   # through the service
 
 It runs ``service.pipeline.ScenePipeline.run(views)`` (detector mode: no boxes given, the shipped detector and
 pose network) on every frame of the sequences, caching each frame's persons (joints, per-joint spread in mm) in
@@ -9,6 +10,10 @@ pose network) on every frame of the sequences, caching each frame's persons (joi
 sequence with :class:`posenet.track.Tracker` and prints :func:`posenet.track_eval.evaluate`'s figures (MOTA,
 IDF1, id switches with a 3D gate; per-frame against smoothed MPJPE; acceleration error; per-track bone-length
 standard deviation; the tracker's milliseconds per frame) against issue 15's goals.
+
+With ``--served`` it scores instead what the service answered: the JSON lines of ``python -m service.client DATA
+--track`` (each person's ``track_id``, raw ``joints`` and ``smoothed_joints``; the tracking time is the
+response's ``timings.track``), the same figures, as a user of the stream routes gets them.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ from tqdm import tqdm
 from posenet.data.mvor import MvorDataset, load_annotations
 from posenet.execution import machine_line
 from posenet.track import Tracker, TrackerConfig
-from posenet.track_eval import GOALS, SequenceFrame, evaluate, goal_lines
+from posenet.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
 
 
 def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -> None:
@@ -55,8 +60,11 @@ def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -
             f.write(json.dumps(record) + "\n")
 
 
-def sequences(gt: dict, detections: dict[str, dict]) -> dict[int, list[SequenceFrame]]:
-    """Per sequence, its frames in time order: ground truth (person ids and joints) and the pipeline's persons."""
+def sequences(gt: dict, detections: dict[str, dict] | None = None, served: dict[str, dict] | None = None):
+    """Per sequence, its frames in time order: ground truth (person ids and joints) and the pipeline's persons
+    (``detections``), or the service's tracks (``served``: the client's ``--track`` lines by frame id).
+
+    Returns ``{sequence: frames}``; with ``served``, ``{sequence: (frames, tracks per frame, track ms)}``."""
     poses = defaultdict(list)
     for pose in gt["annotations3D"]:
         poses[pose["image_ids"]].append(pose)
@@ -65,21 +73,44 @@ def sequences(gt: dict, detections: dict[str, dict]) -> dict[int, list[SequenceF
         if "sequence" not in mv:
             raise ValueError(f"frame {mv['id']} has no 'sequence': render with posenet.data.synth --sequence")
         gts = poses[mv["id"]]
-        det = detections[mv["id"]]["persons"]
-        out[mv["sequence"]].append(
-            SequenceFrame(
-                timestamp_s=float(mv["timestamp_s"]),
-                gt_ids=np.array([p["person_id"] for p in gts], int),
-                gt_joints=np.array([np.reshape(p["keypoints3D"], (-1, 4))[:10, :3] for p in gts]).reshape(
-                    -1, 10, 3
-                ),
-                joints=np.array([p["joints"] for p in det], float).reshape(-1, 10, 3),
-                spread=np.array([p["spread_mm"] for p in det], float).reshape(-1, 10),
-            )
+        det = [] if detections is None else detections[mv["id"]]["persons"]
+        frame = SequenceFrame(
+            timestamp_s=float(mv["timestamp_s"]),
+            gt_ids=np.array([p["person_id"] for p in gts], int),
+            gt_joints=np.array([np.reshape(p["keypoints3D"], (-1, 4))[:10, :3] for p in gts]).reshape(
+                -1, 10, 3
+            ),
+            joints=np.array([p["joints"] for p in det], float).reshape(-1, 10, 3),
+            spread=np.array([p["spread_mm"] for p in det], float).reshape(-1, 10),
         )
-    for frames in out.values():
-        frames.sort(key=lambda f: f.timestamp_s)
-    return dict(out)
+        out[mv["sequence"]].append((frame, None if served is None else served_tracks(served, mv["id"])))
+    result = {}
+    for seq, rows in out.items():
+        rows.sort(key=lambda r: r[0].timestamp_s)
+        frames = [f for f, _ in rows]
+        result[seq] = (
+            frames if served is None else (frames, [t for _, (t, _) in rows], [m for _, (_, m) in rows])
+        )
+    return result
+
+
+def served_tracks(lines: dict[str, dict], frame_id: str) -> tuple[dict[int, TrackedPerson], float]:
+    """The confirmed tracks that the service answered for one frame, and its tracking milliseconds."""
+    if frame_id not in lines:
+        raise ValueError(
+            f"frame {frame_id} is not in the --served output: finish the client run (it resumes)"
+        )
+    line = lines[frame_id]
+    if line.get("status") != 200:
+        raise ValueError(f"frame {frame_id} was answered {line.get('status')}: {line.get('error')}")
+    response = line["response"]
+    tracks = {}
+    for p in response["persons"]:
+        if p.get("track_id") is not None:
+            raw = np.array([j["position"] for j in p["joints"]], float)
+            smooth = np.array([j["position"] for j in p["smoothed_joints"]], float)
+            tracks[int(p["track_id"])] = TrackedPerson(int(p["track_id"]), raw, smooth)
+    return tracks, float(response.get("timings", {}).get("track", float("nan")))
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -89,26 +120,43 @@ def main(argv: list[str] | None = None) -> dict:
         "--data", type=Path, required=True, help="a rendered sequence (posenet.data.synth --sequence)"
     )
     p.add_argument("--annotations", type=Path, help="its annotations (default: DATA/annotations.json)")
-    p.add_argument("--detections", type=Path, required=True, help="the pipeline's persons per frame (cache)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--detections", type=Path, help="the pipeline's persons per frame (cache), tracked here")
+    src.add_argument(
+        "--served",
+        type=Path,
+        help="instead: the JSON lines of `service.client DATA --track` (the service's own tracks and timings)",
+    )
     p.add_argument("--redetect", action="store_true", help="run the pipeline even when --detections exists")
     p.add_argument("--backend", default="torch", help="the networks' runtime (torch, openvino, onnxruntime)")
     p.add_argument("--threads", type=int, default=None, help="the runtimes' intra-op threads")
     p.add_argument("--json", type=Path, help="also write the figures here")
     args = p.parse_args(argv)
     gt = load_annotations(args.annotations or args.data / "annotations.json")
-    if args.redetect or not args.detections.is_file():
-        detect(args.data, gt, args.detections, args.backend, args.threads)
-    with open(args.detections) as f:
-        detections = {r["id"]: r for r in map(json.loads, f)}
     config = TrackerConfig()
     report = {"machine": machine_line(), "date": time.strftime("%Y-%m-%d"), "tracker": vars(config).copy()}
-    seconds = [r["seconds"] for r in detections.values()]
-    report["pipeline_seconds_per_frame"] = round(float(np.mean(seconds)), 3)
     report["sequences"] = {}
-    for seq, frames in sequences(gt, detections).items():
-        report["sequences"][seq] = evaluate(frames, Tracker(config))
+    if args.served:
+        with open(args.served) as f:
+            lines = {r["id"]: r for r in (json.loads(t) for t in f if t.strip())}
+        report["source"] = f"served: {args.served}"
+        report["pipeline_seconds_per_frame"] = round(
+            float(np.mean([r["latency_ms"] for r in lines.values()])) / 1e3, 3
+        )
+        for seq, (frames, hyps, ms) in sequences(gt, served=lines).items():
+            report["sequences"][seq] = score(frames, hyps, ms)
+    else:
+        if args.redetect or not args.detections.is_file():
+            detect(args.data, gt, args.detections, args.backend, args.threads)
+        with open(args.detections) as f:
+            detections = {r["id"]: r for r in map(json.loads, f)}
+        report["source"] = f"offline: {args.detections}"
+        seconds = [r["seconds"] for r in detections.values()]
+        report["pipeline_seconds_per_frame"] = round(float(np.mean(seconds)), 3)
+        for seq, frames in sequences(gt, detections).items():
+            report["sequences"][seq] = evaluate(frames, Tracker(config))
     for seq, figures in report["sequences"].items():
-        print(f"sequence {seq}: {len(frames)} frames")
+        print(f"sequence {seq}: {figures['frames']} frames")
         for line in goal_lines(figures):
             print("  " + line)
     print(report["machine"])

@@ -1,7 +1,7 @@
 """How well a tracker follows people over a sequence: identities, smoothness, plausible bones, cost.
 
 :func:`evaluate` runs a :class:`posenet.track.Tracker` over a sequence's frames (the pose pipeline's persons
-and the ground truth) and measures:
+and the ground truth) and :func:`score` measures its tracks, or tracks made elsewhere (a served stream's):
 
 - **Identities** with ``motmetrics`` (CLEAR MOT and IDF1): a confirmed track and a ground-truth person can match
   when their mean joint distance is at most ``gate_mm`` (3D, mm). MOTA, IDF1, id switches, and switches per 1,000
@@ -75,23 +75,53 @@ def _accel_error(series: dict) -> float:
     return round(float(np.mean(errors)), 2) if errors else float("nan")
 
 
-def evaluate(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = 500.0) -> dict:
-    """Track one sequence's ``frames`` (in time order) with ``tracker`` and measure it (module docstring)."""
-    import motmetrics as mm  # imported here: pandas takes a while, and only the evaluation needs it
+@dataclass
+class TrackedPerson:
+    """A confirmed track's person in one frame: raw (J, 3) and smoothed (J, 3) joints, mm (as
+    ``posenet.track.Tracker.update`` gives them, or as the service's stream answered them)."""
 
-    acc = mm.MOTAccumulator(auto_id=True)
+    track_id: int
+    raw: np.ndarray
+    joints: np.ndarray
+
+
+def run_tracker(frames: list[SequenceFrame], tracker: Tracker) -> tuple[list[dict], list[float]]:
+    """Track the frames' persons: per frame ``{track_id: person}`` of the confirmed tracks, and the tracker's
+    milliseconds per frame."""
     ms, hyps = [], []
     for fr in frames:
         t0 = time.perf_counter()
         out = tracker.update(fr.joints, fr.spread, fr.timestamp_s)
         ms.append((time.perf_counter() - t0) * 1e3)
-        confirmed = [p for p in out if p.track_id is not None]
-        hyps.append({p.track_id: p for p in confirmed})
+        hyps.append({p.track_id: p for p in out if p.track_id is not None})
+    return hyps, ms
+
+
+def evaluate(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = 500.0) -> dict:
+    """Track one sequence's ``frames`` (in time order) with ``tracker`` and measure it (module docstring)."""
+    hyps, ms = run_tracker(frames, tracker)
+    return score(frames, hyps, ms, gate_mm)
+
+
+def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_mm: float = 500.0) -> dict:
+    """Measure tracks against the ground truth (module docstring).
+
+    Args:
+        frames: the sequence in time order (only the ground truth and the time are read).
+        hyps: per frame, ``{track_id: person}`` of the confirmed tracks; a person has ``raw`` and ``joints``
+            (smoothed), (J, 3) mm: :func:`run_tracker`'s, or :class:`TrackedPerson` s of a served stream.
+        ms: the tracker's milliseconds per frame.
+    """
+    import motmetrics as mm  # imported here: pandas takes a while, and only the evaluation needs it
+
+    if len(hyps) != len(frames):
+        raise ValueError(f"{len(hyps)} frames of tracks for {len(frames)} frames of ground truth")
+    acc = mm.MOTAccumulator(auto_id=True)
+    for fr, hyp in zip(frames, hyps, strict=True):
+        confirmed = list(hyp.values())
         smoothed = np.array([p.joints for p in confirmed]).reshape(len(confirmed), NUM_JOINTS, 3)
         dist = mean_joint_distance(fr.gt_joints.reshape(-1, NUM_JOINTS, 3), smoothed)  # (G, H)
-        acc.update(
-            fr.gt_ids.tolist(), [p.track_id for p in confirmed], np.where(dist <= gate_mm, dist, np.nan)
-        )
+        acc.update(fr.gt_ids.tolist(), list(hyp), np.where(dist <= gate_mm, dist, np.nan))
     mh = mm.metrics.create()
     summary = mh.compute(acc, metrics=["mota", "idf1", "num_switches", "num_objects", "num_false_positives",
                                        "num_misses", "num_frames"], name="s")  # fmt: skip

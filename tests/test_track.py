@@ -8,7 +8,7 @@ import pytest
 from posenet.data.synth.poses import PoseParams, build_pose
 from posenet.skeleton import NUM_JOINTS
 from posenet.track import Tracker, TrackerConfig, bone_lengths, project_bones
-from posenet.track_eval import SequenceFrame, evaluate
+from posenet.track_eval import SequenceFrame, TrackedPerson, evaluate, run_tracker, score
 
 FPS = 15.0
 # The pipeline's spread overstates its error: on rendered sequences a median spread of ~300 mm came with a mean
@@ -174,3 +174,23 @@ def test_evaluation_scores_a_clean_run_and_counts_a_swap():
                              fr.gt_joints, fr.joints, fr.spread)
                for f, fr in enumerate(frames)]  # fmt: skip
     assert evaluate(swapped, Tracker())["id_switches"] == 2
+
+
+def test_tracks_made_elsewhere_score_as_the_tracker_s_own():
+    # benchmarks/tracking.py --served scores a stream's answers (track ids, raw and smoothed joints) with
+    # track_eval.score: the same tracks, passed as TrackedPerson, give the same figures as evaluate().
+    truth = trajectories(2, 40)
+    rng = np.random.default_rng(2)
+    frames = [
+        SequenceFrame(f / FPS, np.array([0, 1]), truth[:, f], truth[:, f] + rng.normal(0, 20, truth[:, f].shape),
+                      np.full((2, NUM_JOINTS), SPREAD_PER_NOISE * 20.0))
+        for f in range(40)
+    ]  # fmt: skip
+    hyps, ms = run_tracker(frames, Tracker())
+    served = [{t: TrackedPerson(t, p.raw.copy(), p.joints.copy()) for t, p in h.items()} for h in hyps]
+    assert score(frames, served, ms) == score(frames, hyps, ms)
+    assert {k: v for k, v in evaluate(frames, Tracker()).items() if "_ms_" not in k} == {
+        k: v for k, v in score(frames, served, ms).items() if "_ms_" not in k
+    }
+    with pytest.raises(ValueError, match="39 frames of tracks for 40"):
+        score(frames, served[1:], ms[1:])
