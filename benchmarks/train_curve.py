@@ -3,6 +3,7 @@
     python benchmarks/train_curve.py --data data/mvor_twin --minutes 30 --threads 1 --out runs/curve_twin
     python benchmarks/train_curve.py --data data/mvor_alt --minutes 30 \\
         --variant cpu= --variant lr3e-3="--lr 3e-3" --variant base24="--base 24"
+    python benchmarks/train_curve.py --from-runs runs/ship2 --out runs/ship2_curve   # draw finished runs
 
 Minutes are CPU-minutes (``--clock cpu``: the training process's CPU time, so a loaded, shared machine slows
 the run but does not bend its curve; with ``--threads 1``, minutes of one core). Each variant is one
@@ -37,7 +38,9 @@ def run(variant: str, extra: list[str], args) -> list[dict]:
     return [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
 
 
-def picture(curves: dict[str, list[dict]], path: Path, title: str) -> None:
+def picture(
+    curves: dict[str, list[dict]], path: Path, title: str, xlabel: str = "CPU-minutes of training"
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -47,8 +50,14 @@ def picture(curves: dict[str, list[dict]], path: Path, title: str) -> None:
     for name, log in curves.items():
         pts = [(r["minutes"], r["val_mpjpe_cm"]) for r in log if "val_mpjpe_cm" in r]
         if pts:
-            ax.plot(*zip(*pts, strict=True), marker="o", label=name)
-    ax.set_xlabel("CPU-minutes of training")
+            line = ax.plot(*zip(*pts, strict=True), marker="o", label=f"{name}: held-out day")[0]
+        # posenet.train --watch sets (e.g. the unseen look), dashed in the same colour
+        watched = sorted({k for r in log for k in r if k.startswith("watch_") and k.endswith("_cm")})
+        for k, style in zip(watched, ("--", ":", "-."), strict=False):
+            pts = [(r["minutes"], r[k]) for r in log if k in r]
+            ax.plot(*zip(*pts, strict=True), style, marker=".", color=line.get_color(),
+                    label=f"{name}: {k[len('watch_'):-len('_cm')]} (watched)")  # fmt: skip
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("held-out MPJPE, cm (overall)")
     ax.set_title(title, fontsize=9)
     ax.grid(alpha=0.3)
@@ -60,7 +69,10 @@ def picture(curves: dict[str, list[dict]], path: Path, title: str) -> None:
 def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
-    p.add_argument("--data", type=Path, required=True, help="MVOR-format dataset (train days + held-out day)")
+    p.add_argument("--data", type=Path, help="MVOR-format dataset (train days + held-out day)")
+    p.add_argument("--from-runs", type=Path, nargs="+", metavar="RUN",
+                   help="instead of training: print and draw the logs of these posenet.train run folders "
+                   "(e.g. a --minutes run with --watch sets)")  # fmt: skip
     p.add_argument("--holdout-day", type=int, default=4)
     p.add_argument("--minutes", type=float, default=30.0, help="training budget of each variant")
     p.add_argument("--every", type=float, default=5.0, help="minutes of training between validations")
@@ -73,18 +85,45 @@ def main(argv: list[str] | None = None) -> dict:
 
     from posenet.execution import machine_line
 
-    curves = {name: run(name, shlex.split(extra), args) for name, extra in variants.items()}
+    if args.from_runs:
+        curves = {
+            r.name: [json.loads(t) for t in (r / "log.jsonl").read_text().splitlines()]
+            for r in args.from_runs
+        }
+        config = json.loads((args.from_runs[0] / "config.json").read_text())
+        args.data, args.threads, args.holdout_day = (
+            Path(config["data"]),
+            config["threads"],
+            config["holdout_day"],
+        )
+        clock = config.get("clock", "wall")
+    elif args.data is None:
+        p.error("give --data (to train the variants) or --from-runs")
+    else:
+        curves = {name: run(name, shlex.split(extra), args) for name, extra in variants.items()}
+        clock = "cpu"
     steps = sorted({r["minutes"] for log in curves.values() for r in log if "val_mpjpe_cm" in r})
     print(machine_line(), f"(threads {args.threads})")
     print(f"{'variant':<16}" + "".join(f"{m:>8.1f}" for m in steps) + f"{'loss mm':>9}{'crops/s':>9}")
     for name, log in curves.items():
-        at = {r["minutes"]: r["val_mpjpe_cm"] for r in log if "val_mpjpe_cm" in r}
+        keys = ["val_mpjpe_cm"] + sorted(
+            {k for r in log for k in r if k.startswith("watch_") and k.endswith("_cm")}
+        )
         crops = sum(r.get("crops", 0) for r in log) / max(1e-9, 60 * log[-1]["minutes"])
-        row = "".join(f"{at[m]:>8.2f}" if m in at else f"{'':>8}" for m in steps)
-        print(f"{name:<16}{row}{log[-1]['train_loss']:>9.1f}{crops:>9.1f}")
+        for k in keys:
+            at = {r["minutes"]: r[k] for r in log if k in r}
+            row = "".join(f"{at[m]:>8.2f}" if m in at else f"{'':>8}" for m in steps)
+            label = name if k == "val_mpjpe_cm" else f"  {k[len('watch_') : -len('_cm')]}"
+            tail = f"{log[-1]['train_loss']:>9.1f}{crops:>9.1f}" if k == "val_mpjpe_cm" else ""
+            print(f"{label:<16}{row}{tail}")
     result = {"machine": machine_line(), "threads": args.threads, "data": str(args.data), "curves": curves}
     (args.out / "curve.json").write_text(json.dumps(result, indent=2))
-    picture(curves, args.out / "curve.png", f"{args.data.name}, day {args.holdout_day} held out")
+    xlabel = (
+        "CPU-minutes of training"
+        if clock == "cpu"
+        else f"minutes of training (wall clock, {args.threads} threads)"
+    )
+    picture(curves, args.out / "curve.png", f"{args.data.name}, day {args.holdout_day} held out", xlabel)
     return result
 
 
