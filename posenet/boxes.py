@@ -152,9 +152,16 @@ def iou_xyxy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------------------------- persons
 def identified(boxes: np.ndarray, person_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The boxes ``(K', 4)`` of one view that belong to a person, and their ids ``(K',)`` (ids >= 0)."""
-    keep = np.asarray(person_ids) >= 0
-    return np.asarray(boxes)[keep], np.asarray(person_ids)[keep]
+    """The boxes ``(K', 4)`` of one view that belong to a person, and their ids ``(K',)`` (ids >= 0), in order.
+
+    A person has one box per view: where a view repeats an id (the real MVOR file does, day 4 camera 3 frame
+    38), its first box is kept, as :func:`boxes_of_person` reads it."""
+    ids = np.asarray(person_ids).reshape(-1)
+    _, first = np.unique(ids, return_index=True)
+    keep = np.zeros(len(ids), bool)
+    keep[first] = True
+    keep &= ids >= 0
+    return np.asarray(boxes)[keep], ids[keep]
 
 
 def person_ids(ids_per_view: Sequence[np.ndarray]) -> list[int]:

@@ -121,6 +121,11 @@ def test_persons_are_the_boxes_with_an_identity():
     kept, kept_ids = B.identified(boxes[0], ids[0])
     np.testing.assert_array_equal(kept, boxes[0][1:])
     assert kept_ids.tolist() == [3, 1]
+    # a view that repeats an id (the real MVOR file has one) keeps that person's first box, as boxes_of_person
+    twice, twice_ids = B.identified(boxes[0], np.array([1, -1, 1]))
+    np.testing.assert_array_equal(twice, boxes[0][:1])
+    assert twice_ids.tolist() == [1]
+    np.testing.assert_array_equal(B.boxes_of_person([boxes[0]], [np.array([1, -1, 1])], 1)[0], twice[0])
     one = B.boxes_of_person(boxes, ids, 1)
     np.testing.assert_array_equal(one[0], boxes[0][2])
     np.testing.assert_array_equal(one[1], boxes[1][0])
