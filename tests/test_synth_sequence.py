@@ -94,3 +94,13 @@ def test_rendered_sequence_reads_as_mvor_with_stable_ids(tmp_path):
             ja = a.poses[list(a.person_ids).index(pid)]
             jb = b.poses[list(b.person_ids).index(pid)]
             assert np.linalg.norm(ja - jb, axis=-1).max() < 300
+
+
+def test_a_second_sequence_in_one_process_is_its_own(tmp_path):
+    # The renderer keeps a sequence's stage per process; a second dataset rendered in the same process (as in a
+    # test session or a notebook) must not reuse the first one's stage and its frame count.
+    args = ["--sequence", "--persons", "2", "--views", "2", "--fps", "10", "--seed", "1", "--quiet"]
+    assert main(["--out", str(tmp_path / "a"), "--frames", "2", *args])["frames"] == 2
+    assert main(["--out", str(tmp_path / "b"), "--frames", "4", *args])["frames"] == 4
+    fresh = json.loads((tmp_path / "b" / "annotations.json").read_text())
+    assert [m["frame_index"] for m in fresh["multiview_images"]] == [0, 1, 2, 3]

@@ -199,6 +199,9 @@ _STATE: dict = {}
 
 
 def _init_worker(cfg: SynthConfig, rigs: DatasetRigs, twin: TwinContext | None) -> None:
+    # A new dataset: forget the previous one's sequence stages (a second generate() in one process would
+    # otherwise render the first one's stage, with its frame count).
+    _STATE.clear()
     _STATE.update(cfg=cfg, rigs=rigs, twin=twin)
     cv2.setNumThreads(1)  # parallelism comes from the frame workers
 
