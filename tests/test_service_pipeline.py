@@ -17,7 +17,7 @@ from posenet.data.mvor import MvorDataset
 from posenet.evaluate import evaluate
 from posenet.infer import PoseEstimator
 from posenet.model import ModelConfig, PoseNet
-from service.pipeline import FrameView, ScenePipeline, group_by_ids
+from service.pipeline import FrameView, PipelineConfig, ScenePipeline, group_by_ids
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +26,9 @@ def setup(tmp_path_factory):
     cfg = ModelConfig(precision="fp32")  # float32 so that batched and single runs agree to rounding
     pose = PoseEstimator(PoseNet(cfg), {"model": dataclasses.asdict(cfg)})
     data = write_tiny_mvor(tmp_path_factory.mktemp("tiny"), days=(1,), frames_per_day=2)
-    return ScenePipeline(pose), data, MvorDataset(data.root, data.gt)
+    # The paper's centre matcher: these tests compare its groups (the skeleton matcher, the default, groups by a
+    # random network's skeletons here; it has its own tests in tests/test_skeleton_matching.py).
+    return ScenePipeline(pose, config=PipelineConfig(matcher="centres")), data, MvorDataset(data.root, data.gt)
 
 
 def test_group_by_ids():

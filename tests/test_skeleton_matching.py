@@ -157,10 +157,10 @@ def test_skeleton_distance_is_a_median_over_joints_valid_in_both():
     assert [list(m) for m, _ in groups] == [[0], [1]]
 
 
-def test_centres_stay_the_default_and_give_todays_groups(tiny):
+def test_skeletons_are_the_default_and_centres_give_todays_groups(tiny):
     est = estimator()
-    pipe = ScenePipeline(est)
-    assert PipelineConfig().matcher == "centres"
+    pipe = ScenePipeline(est, config=PipelineConfig(matcher="centres"))
+    assert PipelineConfig().matcher == "skeletons"
     with pytest.raises(ValueError, match="matcher"):
         PipelineConfig(matcher="nearest")
     sample = tiny[1][0]
@@ -200,7 +200,7 @@ def test_pipeline_with_the_skeleton_matcher(tiny):
         evaluate_association(tiny[1], matcher="skeletons", progress=False)
     # A sweep scores every config from the same heatmaps: each row equals a run with that config alone.
     configs = [
-        SkeletonMatchConfig(threshold_mm=t, same_view_mm=s) for t in (1.0, 400.0) for s in (1.0, 250.0)
+        SkeletonMatchConfig(threshold_mm=t, same_view_mm=s) for t in (1.0, 600.0) for s in (1.0, 250.0)
     ]
     rows = evaluate_association(
         tiny[1], matcher="skeletons", pose=est, skeleton_configs=configs, progress=False
@@ -219,7 +219,8 @@ def test_members_of_lists_every_box_of_a_group():
 
 
 def test_served_detector_mode_with_the_skeleton_matcher(tmp_path, tiny):
-    """A real uvicorn server with ORPOSE_MATCHER=skeletons answers a detector-mode frame; /model is unchanged."""
+    """A real uvicorn server with ORPOSE_MATCHER=skeletons answers a detector-mode frame and reference boxes
+    without ids (a split box merged into its person's hull)."""
     import json
 
     import httpx
@@ -243,6 +244,19 @@ def test_served_detector_mode_with_the_skeleton_matcher(tmp_path, tiny):
         for person in out["persons"]:
             assert np.isfinite([j["position"] for j in person["joints"]]).all()
             assert all(0 <= s["score"] <= 1 for s in person["views"])
+        # Reference boxes without ids, one person's box in view 0 also sent split in half: whatever the
+        # grouping, a 200 whose boxes are the boxes as sent, or the hull of several of them (a merged split).
+        ref, files = scene_request(ds[0], data.root, reference_boxes=True)
+        for view in ref["views"]:
+            del view["person_ids"]
+        x0, y0, x1, y1 = ref["views"][0]["boxes"][0]
+        ref["views"][0]["boxes"].append([x0, y0, (x0 + x1) / 2, y1])
+        r = client.post("/scenes", data={"scene": json.dumps(ref)}, files=files)
+        assert r.status_code == 200, r.text
+        for person in r.json()["persons"]:
+            for s in person["views"]:
+                sent = np.asarray(ref["views"][s["view"]]["boxes"])
+                assert all(np.isclose(s["box"][c], sent[:, c]).any() for c in range(4)), (s, sent)
         bad = {"ORPOSE_MATCHER": "nearest"}
     with pytest.raises(RuntimeError, match="matcher"), Server({**env, **bad}, startup_s=60):
         pass
