@@ -131,9 +131,16 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--backend", default="torch", help="the networks' runtime (torch, openvino, onnxruntime)")
     p.add_argument("--threads", type=int, default=None, help="the runtimes' intra-op threads")
     p.add_argument("--json", type=Path, help="also write the figures here")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a TrackerConfig field (offline tracking), e.g. --set max_spread_mm=500")  # fmt: skip
     args = p.parse_args(argv)
     gt = load_annotations(args.annotations or args.data / "annotations.json")
     config = TrackerConfig()
+    for item in args.set:
+        key, _, value = item.partition("=")
+        if not hasattr(config, key):
+            p.error(f"--set {item}: TrackerConfig has no field {key!r}")
+        setattr(config, key, type(getattr(config, key))(value))
     report = {"machine": machine_line(), "date": time.strftime("%Y-%m-%d"), "tracker": vars(config).copy()}
     report["sequences"] = {}
     if args.served:
