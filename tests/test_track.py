@@ -158,14 +158,19 @@ def test_time_must_move_forward_and_inputs_be_finite():
     assert tracker.update(np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)), 2.0) == []
 
 
-def test_evaluation_scores_a_clean_run_and_counts_a_swap():
-    truth = trajectories(2, 60)
-    rng = np.random.default_rng(1)
-    frames = [
+def noisy_frames(count: int, seed: int) -> list[SequenceFrame]:
+    """Two persons walking, seen with 20 mm of noise per joint (and the spread that says so)."""
+    truth = trajectories(2, count)
+    rng = np.random.default_rng(seed)
+    return [
         SequenceFrame(f / FPS, np.array([0, 1]), truth[:, f], truth[:, f] + rng.normal(0, 20, truth[:, f].shape),
                       np.full((2, NUM_JOINTS), SPREAD_PER_NOISE * 20.0))
-        for f in range(60)
+        for f in range(count)
     ]  # fmt: skip
+
+
+def test_evaluation_scores_a_clean_run_and_counts_a_swap():
+    frames = noisy_frames(60, seed=1)
     figures = evaluate(frames, Tracker())
     assert figures["id_switches"] == 0 and figures["idf1"] > 0.95 and figures["gt_person_frames"] == 120
     assert figures["mpjpe_ratio"] < 1 and figures["accel_ratio"] < 0.7
@@ -179,13 +184,7 @@ def test_evaluation_scores_a_clean_run_and_counts_a_swap():
 def test_tracks_made_elsewhere_score_as_the_tracker_s_own():
     # benchmarks/tracking.py --served scores a stream's answers (track ids, raw and smoothed joints) with
     # track_eval.score: the same tracks, passed as TrackedPerson, give the same figures as evaluate().
-    truth = trajectories(2, 40)
-    rng = np.random.default_rng(2)
-    frames = [
-        SequenceFrame(f / FPS, np.array([0, 1]), truth[:, f], truth[:, f] + rng.normal(0, 20, truth[:, f].shape),
-                      np.full((2, NUM_JOINTS), SPREAD_PER_NOISE * 20.0))
-        for f in range(40)
-    ]  # fmt: skip
+    frames = noisy_frames(40, seed=2)
     hyps, ms = run_tracker(frames, Tracker())
     served = [{t: TrackedPerson(t, p.raw.copy(), p.joints.copy()) for t, p in h.items()} for h in hyps]
     assert score(frames, served, ms) == score(frames, hyps, ms)
