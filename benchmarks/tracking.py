@@ -60,11 +60,11 @@ def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -
             f.write(json.dumps(record) + "\n")
 
 
-def sequences(gt: dict, detections: dict[str, dict] | None = None, served: dict[str, dict] | None = None):
-    """Per sequence, its frames in time order: ground truth (person ids and joints) and the pipeline's persons
-    (``detections``), or the service's tracks (``served``: the client's ``--track`` lines by frame id).
-
-    Returns ``{sequence: frames}``; with ``served``, ``{sequence: (frames, tracks per frame, track ms)}``."""
+def sequences(
+    gt: dict, detections: dict[str, dict] | None = None
+) -> dict[int, list[tuple[str, SequenceFrame]]]:
+    """Per sequence, its frames in time order, each ``(frame id, frame)``: ground truth (person ids and joints)
+    and the pipeline's persons (``detections``; none without them, e.g. to score the service's own tracks)."""
     poses = defaultdict(list)
     for pose in gt["annotations3D"]:
         poses[pose["image_ids"]].append(pose)
@@ -83,15 +83,10 @@ def sequences(gt: dict, detections: dict[str, dict] | None = None, served: dict[
             joints=np.array([p["joints"] for p in det], float).reshape(-1, 10, 3),
             spread=np.array([p["spread_mm"] for p in det], float).reshape(-1, 10),
         )
-        out[mv["sequence"]].append((frame, None if served is None else served_tracks(served, mv["id"])))
-    result = {}
-    for seq, rows in out.items():
-        rows.sort(key=lambda r: r[0].timestamp_s)
-        frames = [f for f, _ in rows]
-        result[seq] = (
-            frames if served is None else (frames, [t for _, (t, _) in rows], [m for _, (_, m) in rows])
-        )
-    return result
+        out[mv["sequence"]].append((mv["id"], frame))
+    for rows in out.values():
+        rows.sort(key=lambda r: r[1].timestamp_s)
+    return dict(out)
 
 
 def served_tracks(lines: dict[str, dict], frame_id: str) -> tuple[dict[int, TrackedPerson], float]:
@@ -150,8 +145,9 @@ def main(argv: list[str] | None = None) -> dict:
         report["pipeline_seconds_per_frame"] = round(
             float(np.mean([r["latency_ms"] for r in lines.values()])) / 1e3, 3
         )
-        for seq, (frames, hyps, ms) in sequences(gt, served=lines).items():
-            report["sequences"][seq] = score(frames, hyps, ms)
+        for seq, rows in sequences(gt).items():
+            hyps, ms = zip(*(served_tracks(lines, frame_id) for frame_id, _ in rows), strict=True)
+            report["sequences"][seq] = score([f for _, f in rows], list(hyps), list(ms))
     else:
         if args.redetect or not args.detections.is_file():
             detect(args.data, gt, args.detections, args.backend, args.threads)
@@ -160,8 +156,8 @@ def main(argv: list[str] | None = None) -> dict:
         report["source"] = f"offline: {args.detections}"
         seconds = [r["seconds"] for r in detections.values()]
         report["pipeline_seconds_per_frame"] = round(float(np.mean(seconds)), 3)
-        for seq, frames in sequences(gt, detections).items():
-            report["sequences"][seq] = evaluate(frames, Tracker(config))
+        for seq, rows in sequences(gt, detections).items():
+            report["sequences"][seq] = evaluate([f for _, f in rows], Tracker(config))
     for seq, figures in report["sequences"].items():
         print(f"sequence {seq}: {figures['frames']} frames")
         for line in goal_lines(figures):

@@ -189,20 +189,12 @@ def members_of(groups: Sequence[Group], boxes: Sequence[np.ndarray]) -> np.ndarr
     return out
 
 
-def group_boxes(groups: Sequence[Group], boxes: Sequence[np.ndarray]) -> list[list[np.ndarray | None]]:
-    """Per group, per view: its box there, the hull of its boxes where it holds several, or None."""
-    out = []
-    for g in groups:
-        per_view: list[np.ndarray | None] = [
-            None if k < 0 else np.asarray(boxes[v][k], np.float64) for v, k in enumerate(g.indices)
-        ]
-        for v, k in g.extra:
-            b = np.asarray(boxes[v][k], np.float64)
-            per_view[v] = np.concatenate(
-                [np.minimum(per_view[v][:2], b[:2]), np.maximum(per_view[v][2:], b[2:])]
-            )
-        out.append(per_view)
-    return out
+def view_members(group: Group) -> list[tuple[int, ...]]:
+    """Per view, the indices of ``group``'s boxes there: its box (``indices``), then any ``extra`` ones."""
+    out: list[list[int]] = [[] if k < 0 else [int(k)] for k in group.indices]
+    for v, k in group.extra:
+        out[v].append(int(k))
+    return [tuple(m) for m in out]
 
 
 def match_heatmaps(

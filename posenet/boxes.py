@@ -150,6 +150,12 @@ def iou_xyxy(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return box_iou(a[:, None, :], b[None, :, :])
 
 
+def hull(boxes: np.ndarray) -> np.ndarray:
+    """The smallest xyxy box ``(4,)`` holding every box of ``boxes`` ``(K, 4)``, K >= 1."""
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 4)
+    return np.concatenate([boxes[:, :2].min(0), boxes[:, 2:].max(0)])
+
+
 # ----------------------------------------------------------------------------------------------- persons
 def identified(boxes: np.ndarray, person_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The boxes ``(K', 4)`` of one view that belong to a person, and their ids ``(K',)`` (ids >= 0), in order.

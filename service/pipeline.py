@@ -23,7 +23,7 @@ from typing import NamedTuple
 import numpy as np
 import torch
 
-from posenet.boxes import ground_truth_ids, identified
+from posenet.boxes import ground_truth_ids, hull, identified
 from posenet.cameras import Camera
 from posenet.data.sample import Sample
 from posenet.evaluate import prediction_record
@@ -77,6 +77,8 @@ class PersonResult:
         boxes: V entries: the person's (4,) xyxy box in that view, or None where it has none.
         scores: V entries: the detector score of that box, or None (reference box or no box).
         spread_mm: (J,) float, the pose network's per-joint spread in mm (smaller is more certain).
+        box_indices: V entries: the indices, among the boxes of that view given to (or found by) the pipeline, of
+            the person's boxes there (one, several when the skeleton matcher merged a split person, or none).
     """
 
     id: int
@@ -85,6 +87,7 @@ class PersonResult:
     boxes: list[np.ndarray | None]
     scores: list[float | None]
     spread_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    box_indices: list[tuple[int, ...]] = field(default_factory=list)
 
     @property
     def support(self) -> list[int]:
@@ -286,9 +289,13 @@ class ScenePipeline:
             members = None if members is None else members[:limit]
         if heat is None:
             timings["match"] = _ms(t0)
+        if heat is None:  # ids and the centre matcher give per view one box index, or -1
+            groups = [[() if k < 0 else (k,) for k in group] for group in groups]
         persons = [
-            PersonResult(pid, np.zeros(0), np.zeros(0), *self._person_boxes(group, boxes, scores))
-            for pid, group in zip(ids, groups, strict=True)
+            PersonResult(
+                pid, np.zeros(0), np.zeros(0), *self._person_boxes(held, boxes, scores), box_indices=held
+            )
+            for pid, held in zip(ids, groups, strict=True)
         ]
         t0 = time.perf_counter()
         if persons:
@@ -311,22 +318,13 @@ class ScenePipeline:
         return SceneResult("detector" if scores[0] is not None else "reference_boxes", persons, timings)
 
     @staticmethod
-    def _person_boxes(group, boxes, scores) -> tuple[list, list]:
-        """Per view the person's box and detector score: ``group`` is per view a box index or -1, or a
-        ``detector.matching.Group`` (whose extra boxes in a view widen its box to their hull, best score)."""
-        if isinstance(group, list):
-            return (
-                [None if k < 0 else boxes[v][k] for v, k in enumerate(group)],
-                [None if k < 0 or scores[v] is None else float(scores[v][k]) for v, k in enumerate(group)],
-            )
-        from detector.skeleton_matching import group_boxes
-
-        per_view = group_boxes([group], boxes)[0]
-        best: list[float | None] = [None] * len(boxes)
-        for v, k in [*enumerate(group.indices), *group.extra]:
-            if k >= 0 and scores[v] is not None:
-                best[v] = max(best[v] or 0.0, float(scores[v][k]))
-        return per_view, best
+    def _person_boxes(members: list[tuple[int, ...]], boxes, scores) -> tuple[list, list]:
+        """Per view the person's box (the hull of its boxes ``members`` there) and its best detector score."""
+        return (
+            [hull(boxes[v][list(ks)]) if ks else None for v, ks in enumerate(members)],
+            [max(float(scores[v][k]) for k in ks) if ks and scores[v] is not None else None
+             for v, ks in enumerate(members)],
+        )  # fmt: skip
 
     def _fit_boxes(self, boxes, scores, limit: int, why: str) -> tuple[list, list]:
         """The skeleton matcher runs the U-Net on every box, laid out as max_v K_v persons: keep that within the
@@ -343,13 +341,13 @@ class ScenePipeline:
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
         Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds spent after
-        the U-Net, the ``detector.matching.Group`` s and their ``(P, S)`` box numbers."""
-        from detector.skeleton_matching import match_heatmaps, members_of
+        the U-Net, per person and view the indices of its boxes there, and their ``(P, S)`` box numbers."""
+        from detector.skeleton_matching import match_heatmaps, members_of, view_members
 
         heat = self.pose.box_heatmaps(list(views), boxes)
         t0 = time.perf_counter()
         groups = match_heatmaps(heat, views, boxes, max_combinations=self.config.max_match_combinations)
-        return heat, _ms(t0), groups, members_of(groups, boxes)
+        return heat, _ms(t0), [view_members(g) for g in groups], members_of(groups, boxes)
 
     # ----------------------------------------------------------------------------------------- offline
     def run_sample(self, sample: Sample, reference_boxes: bool = True) -> tuple[SceneResult, list[dict]]:

@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from posenet.boxes import hull
 from posenet.skeleton import JOINTS
 from service.errors import InputError
 from service.pipeline import PersonResult, SceneResult
@@ -33,39 +34,10 @@ def _restore_sent_boxes(persons: list[PersonResult], scene: ValidatedScene) -> N
                 if box is not None and k != 1:
                     person.boxes[v] = (np.asarray(box, np.float64) + 0.5) * k - 0.5
         return
-    used: list[set[int]] = [set() for _ in scene.boxes]
-    for person in persons:
-        for v, box in enumerate(person.boxes):
-            if box is None:
-                continue
-            if scene.person_ids is not None:  # the id names the box
-                ks = [int(np.flatnonzero(scene.person_ids[v] == person.id)[0])]
-            else:  # the first unused box with these clipped coordinates
-                clipped = scene.boxes[v]
-                ks = [
-                    next(
-                        (
-                            k
-                            for k in range(len(clipped))
-                            if k not in used[v] and np.array_equal(clipped[k], box)
-                        ),
-                        -1,
-                    )
-                ]
-                if ks[0] < 0:
-                    # The skeleton matcher gave this person several boxes of the view (a split or duplicated
-                    # person): its box there is their hull, answered as the hull of those boxes as sent.
-                    inside = (clipped[:, :2] >= box[:2] - 1e-6).all(1) & (
-                        clipped[:, 2:] <= box[2:] + 1e-6
-                    ).all(1)
-                    ks = [k for k in np.flatnonzero(inside).tolist() if k not in used[v]]
-            if not ks:
-                continue  # not one of the boxes sent (cannot happen): keep the computed box
-            used[v].update(ks)
-            sent = np.asarray([scene.sent_boxes[v][k] for k in ks], np.float64)
-            person.boxes[v] = (
-                sent[0] if len(ks) == 1 else np.concatenate([sent[:, :2].min(0), sent[:, 2:].max(0)])
-            )
+    for person in persons:  # reference boxes: the person's boxes as sent (their hull where it holds several)
+        for v, held in enumerate(person.box_indices):
+            if held:
+                person.boxes[v] = hull(np.asarray(scene.sent_boxes[v], np.float64)[list(held)])
 
 
 def _notes(persons: list[PersonResult], scene: ValidatedScene) -> list[str]:
