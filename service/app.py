@@ -84,7 +84,9 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
     app.state.settings = settings
     app.state.pipeline = pipeline
     app.state.in_flight = InFlightLimiter(settings.max_in_flight)
-    tracker = TrackerConfig(max_spread_mm=settings.track_max_spread_mm)
+    tracker = TrackerConfig(
+        max_spread_mm=settings.track_max_spread_mm, min_torso_mm=settings.track_min_torso_mm
+    )
     app.state.streams = StreamRegistry(
         settings.max_streams, settings.stream_idle_s, lambda: Tracker(tracker), settings.retry_after_s
     )

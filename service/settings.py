@@ -90,6 +90,15 @@ class Settings(BaseSettings):
         gt=0,
         description="persons whose median joint spread is above this many mm are answered without a track",
     )
+    # posenet.track.TrackerConfig.min_torso_mm: shorter torsos (neck to mid-hip) are no adult's; on rendered
+    # sequences they are the pose network's folded guess at the draped patient.
+    track_min_torso_mm: float = Field(
+        380.0,
+        ge=0,
+        le=2000,
+        description="persons whose torso (neck to the middle of the hips) is shorter than this many mm are "
+        "answered without a track (0 tracks every torso)",
+    )
     token: SecretStr | None = Field(
         None,
         description="bearer token; when set every route but /health needs it (the docs too, unless "

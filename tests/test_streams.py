@@ -59,7 +59,9 @@ def server(tmp_path_factory):
         "ORPOSE_TOKEN": TOKEN,
         "ORPOSE_MAX_STREAMS": "2",
         "ORPOSE_STREAM_IDLE_S": str(IDLE_S),
+        # Tiny random-init weights: their skeletons are wide spreads with folded torsos, tracked all the same.
         "ORPOSE_TRACK_MAX_SPREAD_MM": "5000",
+        "ORPOSE_TRACK_MIN_TORSO_MM": "0",
     }
     with Server(env) as url, httpx.Client(base_url=url, headers=AUTH, timeout=60) as client:
         yield client

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from posenet.data.synth.poses import PoseParams, build_pose
-from posenet.skeleton import NUM_JOINTS
-from posenet.track import Tracker, TrackerConfig, bone_lengths, project_bones
+from posenet.skeleton import JOINT_INDEX, NUM_JOINTS
+from posenet.track import Tracker, TrackerConfig, bone_lengths, project_bones, torso_length
 from posenet.track_eval import SequenceFrame, TrackedPerson, evaluate, run_tracker, score
 
 FPS = 15.0
@@ -87,6 +87,22 @@ def test_a_one_frame_ghost_and_a_duplicate_never_get_an_id():
         out = tracker.update(np.array(obs), np.full((len(obs), NUM_JOINTS), 30.0), f / FPS)
         assert [p.track_id for p in out][1:] in ([], [None])
     assert tracker.next_id == 1
+
+
+def test_a_folded_skeleton_is_never_tracked_and_a_whole_one_is():
+    """A skeleton whose torso is shorter than any adult's (the pose network's guess at the draped patient) gets no
+    track, however steady; the same skeleton unfolded does."""
+    truth = trajectories(1, 20)[0]  # (F, J, 3) standing persons
+    assert (torso_length(truth) > TrackerConfig().min_torso_mm).all()
+    folded = truth.copy()
+    hips = [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]
+    neck = folded[:, [JOINT_INDEX["neck"]]]
+    folded[:, hips] = neck + (folded[:, hips] - neck) * 0.5  # the torso at half its length
+    for skeletons, expect in ((folded, None), (truth, 0)):
+        tracker = Tracker()
+        for f in range(20):
+            out = tracker.update(skeletons[f][None] + [0.0, 0, 3000], np.full((1, NUM_JOINTS), 30.0), f / FPS)
+        assert out[0].track_id == expect
 
 
 def _jitter(series: dict, which: int) -> float:
