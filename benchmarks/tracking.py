@@ -35,7 +35,8 @@ from posenet.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, go
 
 def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -> None:
     """Run the pipeline in detector mode on every frame of ``data`` and write one JSON line per frame."""
-    from service.pipeline import FrameView, ScenePipeline
+    from posenet.scene import views_of
+    from service.pipeline import ScenePipeline
 
     pipe = ScenePipeline.from_checkpoints(backend=backend, threads=threads)
     ds = MvorDataset(data, gt)
@@ -44,7 +45,7 @@ def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -
         for i in tqdm(range(len(ds)), desc="pipeline", unit="frame"):
             sample = ds[i]
             t0 = time.perf_counter()
-            result = pipe.run([FrameView(v.color, v.depth, v.camera) for v in sample.views])
+            result = pipe.run(views_of(sample))
             record = {
                 "id": sample.id,
                 "seconds": round(time.perf_counter() - t0, 3),

@@ -83,6 +83,7 @@ def main(argv: list[str] | None = None) -> dict:
     args.out.mkdir(parents=True, exist_ok=True)
     variants = dict(v.split("=", 1) for v in (args.variant or ["cpu="]))
 
+    from posenet.checkpoint import training_config
     from posenet.execution import machine_line
 
     if args.from_runs:
@@ -90,7 +91,7 @@ def main(argv: list[str] | None = None) -> dict:
             r.name: [json.loads(t) for t in (r / "log.jsonl").read_text().splitlines()]
             for r in args.from_runs
         }
-        config = json.loads((args.from_runs[0] / "config.json").read_text())
+        config = training_config(json.loads((args.from_runs[0] / "config.json").read_text()))
         args.data, args.threads, args.holdout_day = (
             Path(config["data"]),
             config["threads"],

@@ -32,6 +32,7 @@ from tqdm import tqdm
 from detector.matching import Group, match_boxes
 from detector.skeleton_matching import MATCHERS, SkeletonMatchConfig, match_heatmaps
 from posenet.boxes import boxes_of_person, coco_to_xyxy, dense_boxes, iou_xyxy, match_persons, person_ids
+from posenet.scene import views_of
 
 # As service.pipeline.PipelineConfig.max_match_combinations: frames beyond it are refused, not enumerated.
 PAIRS_LIMIT = 300_000
@@ -152,7 +153,7 @@ def evaluate_association(
                 raise ValueError(f"frame {sample.id} has no depth image: load the dataset with depth")
             depths.append(v.depth)
         if matcher == "skeletons":
-            views = [(v.color, v.depth, v.camera) for v in sample.views]
+            views = views_of(sample)
             heat = pose.box_heatmaps(views, pred)
             groupings = [match_heatmaps(heat, views, pred, c, max_combinations=PAIRS_LIMIT) for c in configs]
         else:

@@ -1,25 +1,26 @@
-"""Detector checkpoints: ``model.safetensors`` + ``config.json`` (+ ``training_state.pt`` for resuming).
+"""Detector checkpoints, in the layout both stages share (``posenet.checkpoint_files``): ``model.safetensors`` +
+``config.json`` (+ ``train_state.pt`` for resuming).
 
-``config.json`` holds the resolved ``DetectorConfig`` (architecture and preprocessing), the exact transformers
-``DetrConfig`` the weights belong to (so a fine-tuned pretrained DETR rebuilds without its original folder),
-and the training config and progress when written by ``detector.train``. A checkpoint is either a folder
-holding those files, or a ``NAME.safetensors`` file with ``NAME.json`` beside it (the shipped
-``detector/weights/default.*``).
+``config.json`` holds ``"model"``: the resolved ``DetectorConfig`` (architecture and preprocessing); ``"train"``:
+the training config (when written by ``detector.train``); ``"trained_on"``; ``"detr"``: the exact transformers
+``DetrConfig`` the weights belong to (so a fine-tuned pretrained DETR rebuilds without its original folder); and
+``"progress"``. A checkpoint is either a folder holding those files, or a ``NAME.safetensors`` file with
+``NAME.json`` beside it (the shipped ``detector/weights/default.*``, written before the shared layout: its model
+config is under ``"detector"``, which :func:`model_config` still reads).
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, replace
 from pathlib import Path
 
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_file
 from transformers import DetrForObjectDetection
 
 from detector.model import DetectorConfig, arch_classes, from_detr_config
+from posenet.checkpoint_files import checkpoint_config, files, read_config, write_checkpoint
 
-WEIGHTS, CONFIG, STATE = "model.safetensors", "config.json", "training_state.pt"
 PRECISIONS = ("float32", "float16", "int8")
 INT8_SCALE = ".int8_scale"  # key suffix of the per-output-channel scales of an int8 weight
 
@@ -50,18 +51,6 @@ def dequantize(state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     return out
 
 
-def checkpoint_files(path: str | Path) -> tuple[Path, Path]:
-    """The (weights, config) files of a checkpoint folder or ``.safetensors`` file."""
-    path = Path(path)
-    if path.is_dir() or (not path.exists() and path.suffix == ""):
-        return path / WEIGHTS, path / CONFIG
-    if path.suffix == ".safetensors":
-        return path, path.with_suffix(".json")
-    if path.suffix == ".json":
-        return path.with_suffix(".safetensors"), path
-    raise ValueError(f"checkpoint {path} is neither a folder nor a .safetensors/.json file")
-
-
 def save_checkpoint(
     path: str | Path,
     model: DetrForObjectDetection,
@@ -69,57 +58,51 @@ def save_checkpoint(
     train: dict | None = None,
     progress: dict | None = None,
     precision: str = "float32",
-    top: dict | None = None,
+    trained_on: dict | str | None = None,
+    train_state: dict | None = None,
 ) -> Path:
-    """Write ``model``'s weights and the resolved configs to ``path`` (a folder or ``NAME.safetensors``).
+    """Write ``model``'s weights and the resolved configs to ``path`` (a folder or ``NAME.safetensors``), and in a
+    folder the ``train_state`` that ``--resume`` needs.
 
     ``precision``: ``float32`` (as trained), ``float16`` (half the size) or ``int8`` (weight-only, per-output-
-    channel scales: a quarter of the size; ``quantize_int8``); loading casts back to float32. ``top`` adds keys at
-    the top of ``config.json`` (e.g. the shipped weights' ``trained_on`` line).
+    channel scales: a quarter of the size; ``quantize_int8``); loading casts back to float32. ``trained_on``: what
+    the weights were trained on (``detector.train``'s data description, or the shipped weights' line).
     """
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
     path = Path(path)
     if path.suffix != ".safetensors":
         path.mkdir(parents=True, exist_ok=True)
-    else:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    weights, config = checkpoint_files(path)
     state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
     if precision == "float16":
         state = {k: v.half() if v.is_floating_point() else v for k, v in state.items()}
     elif precision == "int8":
         state = quantize_int8(state)
-    state = {k: v.contiguous() for k, v in state.items()}
-    save_file(state, str(weights), metadata={"format": "pt", "dtype": precision})
-    meta = {
-        **(top or {}),
-        "detector": asdict(cfg),
-        "detr": model.config.to_dict(),
-        "train": train,
-        "progress": progress,
-    }
-    config.write_text(json.dumps(meta, indent=2, default=str))
-    return weights
+    meta = checkpoint_config(asdict(cfg), train, trained_on, detr=model.config.to_dict(), progress=progress)
+    return write_checkpoint(path, state, meta, train_state, metadata={"format": "pt", "dtype": precision})
 
 
-def read_config(path: str | Path) -> dict:
-    """The ``config.json`` dict of a checkpoint."""
-    _, config = checkpoint_files(path)
-    if not config.is_file():
-        raise FileNotFoundError(f"checkpoint config {config} does not exist")
-    return json.loads(config.read_text())
+def model_config(meta: dict) -> dict:
+    """The ``DetectorConfig`` dict of a checkpoint config (under ``"detector"`` in configs from before the
+    shared layout, such as the shipped ``detector/weights/default.json``)."""
+    return meta["model"] if "model" in meta else meta["detector"]
+
+
+def trained_on(meta: dict) -> dict | str | None:
+    """What a detector checkpoint was trained on; configs from before the shared layout kept a run's account in
+    the model config's ``extra``."""
+    return meta.get("trained_on") or model_config(meta).get("extra", {}).get("trained_on")
 
 
 def load_checkpoint(
     path: str | Path, device: str | torch.device = "cpu"
 ) -> tuple[DetrForObjectDetection, DetectorConfig, dict]:
     """Rebuild the model of a checkpoint and load its weights; returns ``(model in eval mode, cfg, meta)``."""
-    weights, _ = checkpoint_files(path)
+    weights, _ = files(path)
     if not weights.is_file():
         raise FileNotFoundError(f"checkpoint weights {weights} do not exist")
     meta = read_config(path)
-    cfg = DetectorConfig(**meta["detector"])
+    cfg = DetectorConfig(**model_config(meta))
     # The weights are in the file: rebuild the architecture from the saved DetrConfig, never from the hub.
     cfg = replace(cfg, pretrained=None)
     detr = dict(meta["detr"])

@@ -26,6 +26,7 @@ import torch
 from torchvision.ops import nms
 
 from detector.checkpoint import PRECISIONS, load_checkpoint, save_checkpoint
+from detector.checkpoint import trained_on as saved_trained_on
 from detector.data import load_records
 from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
@@ -94,7 +95,8 @@ def export(
     threshold_metrics: dict | None = None,
 ) -> Path:
     """Write ``run``'s weights and config to ``out`` (a ``.safetensors`` path or a folder); ``threshold`` and
-    ``nms_iou`` (a float, None for no suppression, "keep" for the run's own) replace the run's settings."""
+    ``nms_iou`` (a float, None for no suppression, "keep" for the run's own) replace the run's settings, and
+    ``trained_on`` (a line) the run's own account of its training data."""
     model, cfg, meta = load_checkpoint(run)
     if threshold is not None:
         cfg = replace(cfg, score_threshold=float(threshold))
@@ -102,9 +104,9 @@ def export(
         cfg = replace(cfg, nms_iou=nms_iou)
     if threshold_metrics is not None:
         cfg = replace(cfg, extra={**cfg.extra, "threshold_chosen_on": threshold_metrics})
-    top = {"trained_on": trained_on} if trained_on else None
+    trained_on = trained_on or saved_trained_on(meta)
     return save_checkpoint(
-        out, model, cfg, meta.get("train"), meta.get("progress"), precision=precision, top=top
+        out, model, cfg, meta.get("train"), meta.get("progress"), precision=precision, trained_on=trained_on
     )
 
 

@@ -81,10 +81,10 @@ def main(argv: list[str] | None = None) -> list[dict]:
     if args.predictions:
         predictions = json.loads(Path(args.predictions).read_text())
         if threshold is None:
-            from detector.checkpoint import read_config
+            from detector.checkpoint import model_config, read_config
             from detector.infer import DEFAULT_WEIGHTS
 
-            threshold = read_config(args.checkpoint or DEFAULT_WEIGHTS)["detector"]["score_threshold"]
+            threshold = model_config(read_config(args.checkpoint or DEFAULT_WEIGHTS))["score_threshold"]
     else:
         from detector.data import load_records
         from detector.infer import PersonDetector

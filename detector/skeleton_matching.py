@@ -41,6 +41,7 @@ from detector.matching import (
     combinations_within,
 )
 from posenet.cameras import Camera
+from posenet.scene import SceneView
 
 MATCHERS = ("centres", "skeletons")
 
@@ -199,7 +200,7 @@ def view_members(group: Group) -> list[tuple[int, ...]]:
 
 def match_heatmaps(
     heat,
-    views: Sequence[tuple[np.ndarray | None, np.ndarray, Camera]],
+    views: Sequence[SceneView],
     boxes: Sequence[np.ndarray],
     config: SkeletonMatchConfig | None = None,
     max_combinations: float | None = None,
@@ -211,5 +212,5 @@ def match_heatmaps(
     joints = alone.joints.float().cpu().numpy()  # (N, J, 3)
     ok = np.isfinite(joints).all(-1) & alone.has_points.cpu().numpy()[:, None]  # (N, J)
     return match_skeletons(
-        boxes, [v[1] for v in views], [v[2] for v in views], joints, ok, config, max_combinations
+        boxes, [v.depth for v in views], [v.camera for v in views], joints, ok, config, max_combinations
     )

@@ -6,7 +6,8 @@
     python -m detector.train ... --out RUN --resume                   # continue RUN where it stopped
 
 Trains on every day but the held-out one. After each epoch it writes ``RUN/model.safetensors``,
-``RUN/config.json`` (the resolved detector + training config and the progress) and ``RUN/training_state.pt``
+``RUN/config.json`` (the resolved detector + training config, what it was trained on and the progress; the layout
+of ``posenet.checkpoint_files``) and ``RUN/train_state.pt``
 (optimiser, schedule, RNG, for ``--resume``), evaluates COCO AP on the held-out day, and appends a line to
 ``RUN/log.jsonl``. The ``paper`` preset's defaults are the paper's: 10 epochs, batch 2, lr 1e-4, backbone lr
 1e-5, weight decay 1e-4.
@@ -27,13 +28,15 @@ from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from detector.augment import AugmentConfig
-from detector.checkpoint import STATE, load_checkpoint, read_config, save_checkpoint
+from detector.checkpoint import load_checkpoint, read_config, save_checkpoint
+from detector.checkpoint import trained_on as saved_trained_on
 from detector.data import DetectionDataset, collate, load_records, worker_init
 from detector.dense import DenseLoss
 from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
 from detector.model import ARCHS, DetectorConfig, build_detector, param_groups, preset
 from detector.predict import predict_records
+from posenet.checkpoint_files import train_state_file
 from posenet.data.mvor import read_annotation_json
 
 
@@ -103,8 +106,10 @@ def train(
     eval_fn=None,
     resume: bool = False,
     progress: bool = True,
+    trained_on: dict | None = None,
 ) -> list[dict]:
-    """Train ``model`` on ``train_set``; checkpoint into ``out`` each epoch; returns the per-epoch log."""
+    """Train ``model`` on ``train_set``; checkpoint into ``out`` each epoch (with ``trained_on``, the account of
+    the training data that ``config.json`` carries); returns the per-epoch log."""
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
     loader = DataLoader(
@@ -134,8 +139,9 @@ def train(
     optimizer = torch.optim.AdamW(groups, lr=cfg.lr, weight_decay=cfg.weight_decay)
     total = cfg.epochs * len(loader)
     start_epoch, step, log = 0, 0, []
-    if resume and (out / STATE).is_file():
-        state = torch.load(out / STATE, weights_only=False)
+    state_file = train_state_file(out) if resume else None  # an old run's training_state.pt too
+    if state_file is not None:
+        state = torch.load(state_file, weights_only=False)
         optimizer.load_state_dict(state["optimizer"])
         start_epoch, step, log = state["epoch"], state["step"], state["log"]
         if dense is not None and state.get("dense") is not None:
@@ -149,7 +155,6 @@ def train(
 
     def save(entry: dict, done: int, step: int) -> None:
         """Weights + configs (``config.json``) and the state that ``--resume`` needs."""
-        save_checkpoint(out, model, det_cfg, train_dict, {"epoch": done, "step": step, "metrics": entry})
         state = {
             "optimizer": optimizer.state_dict(),
             "epoch": done,
@@ -160,7 +165,10 @@ def train(
             "loader_rng": loader.generator.get_state(),
             "dense": None if dense is None else dense.state_dict(),
         }
-        torch.save(state, out / STATE)
+        done_so_far = {"epoch": done, "step": step, "metrics": entry}
+        save_checkpoint(
+            out, model, det_cfg, train_dict, done_so_far, trained_on=trained_on, train_state=state
+        )
 
     train_dict = {**asdict(cfg), "train_images": len(train_set)}
     for epoch in range(start_epoch, cfg.epochs):
@@ -356,8 +364,10 @@ def main(argv: list[str] | None = None) -> list[dict]:
         "views": len(records),
     }
     if args.resume and (out / "config.json").is_file():
-        model, det_cfg, _ = load_checkpoint(out)
+        model, det_cfg, meta = load_checkpoint(out)
         model.train()
+        trained_on = saved_trained_on(meta)
+        det_cfg.extra.pop("trained_on", None)  # (where runs from before the shared layout kept it)
     elif args.init:
         if (
             args.pretrained
@@ -372,13 +382,10 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 "--init takes the architecture and input of its checkpoint; drop --pretrained, --arch, "
                 "--backbone, --backbone-stage, --queries, --input and --input-width"
             )
-        model, det_cfg, _ = load_checkpoint(args.init)
+        model, det_cfg, meta = load_checkpoint(args.init)
         model.float().train()
-        det_cfg.extra["trained_on"] = {
-            "init": str(args.init),
-            "init_trained_on": det_cfg.extra.get("trained_on"),
-            **trained_on,
-        }
+        trained_on = {"init": str(args.init), "init_trained_on": saved_trained_on(meta), **trained_on}
+        det_cfg.extra.pop("trained_on", None)
     else:
         det_cfg = preset(
             args.preset,
@@ -390,7 +397,6 @@ def main(argv: list[str] | None = None) -> list[dict]:
             input_width=args.input_width,
             backbone_stage=args.backbone_stage,
         )
-        det_cfg.extra["trained_on"] = trained_on
         torch.manual_seed(cfg.seed)
         model = build_detector(det_cfg)
     train_set = DetectionDataset(records, args.data, det_cfg, cfg.augment, seed=cfg.seed, cache=cfg.cache)
@@ -409,7 +415,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         f"{len(records)} views; "
         f"held out: {args.holdout_day}"
     )
-    return train(model, det_cfg, cfg, train_set, out, eval_fn, args.resume, not args.no_progress)
+    return train(model, det_cfg, cfg, train_set, out, eval_fn, args.resume, not args.no_progress, trained_on)
 
 
 if __name__ == "__main__":

@@ -56,10 +56,18 @@ from posenet.adapt_losses import (
     view_consistency,
 )
 from posenet.augment import AugmentConfig
-from posenet.checkpoint import DEFAULT_WEIGHTS, load_checkpoint, save_checkpoint
-from posenet.inputs import ScenePersons, build_scene, persons_of_sample
+from posenet.checkpoint import (
+    DEFAULT_WEIGHTS,
+    checkpoint_files,
+    load_checkpoint,
+    save_checkpoint,
+    sectioned,
+    training_config,
+)
+from posenet.inputs import build_scene
 from posenet.loss import mpjpe
 from posenet.model import ModelConfig, PoseNet
+from posenet.scene import Scene
 from posenet.schedule import Schedule
 from posenet.train import CachedFrames, run_config, scene_loss, trainable_frames
 
@@ -111,7 +119,7 @@ class AdaptConfig:
 
     @staticmethod
     def from_dict(d: dict) -> AdaptConfig:
-        d = dict(d)
+        d = dict(training_config(d))
         if isinstance(d.get("model"), dict):
             d["model"] = ModelConfig.from_dict(d["model"])
         if isinstance(d.get("augment"), dict):
@@ -230,8 +238,8 @@ class StepLosses:
 def adapt_step(
     student: PoseNet,
     teacher: PoseNet,
-    targets: list[ScenePersons],
-    sources: list[ScenePersons],
+    targets: list[Scene],
+    sources: list[Scene],
     cfg: AdaptConfig,
     generator: torch.Generator,
 ) -> StepLosses:
@@ -307,7 +315,7 @@ def adapt(cfg: AdaptConfig) -> dict:
         student, init_config = load_checkpoint(cfg.init, "cpu", cfg.precision)
         cfg.model = dataclasses.replace(student.config, precision="auto")
         if cfg.augment is None:
-            cfg.augment = AugmentConfig(**init_config.get("augment") or {})
+            cfg.augment = AugmentConfig(**training_config(init_config).get("augment") or {})
     if cfg.model.aggregation != "3d":
         raise ValueError(
             "posenet.adapt needs a network with the paper's 3D aggregation (model.aggregation '3d')"
@@ -346,7 +354,18 @@ def adapt(cfg: AdaptConfig) -> dict:
         optimiser.load_state_dict(state["optimiser"])
         start_epoch, schedule.step, schedule.elapsed = state["epoch"], state["step"], state["elapsed_s"]
         print(f"resuming {out} at epoch {start_epoch}", file=sys.stderr)
-    config_dict = dataclasses.asdict(cfg)
+    init = json.loads(checkpoint_files(cfg.init)[1].read_text())
+    trained_on = {
+        "init": cfg.data_description["init"],
+        "init_trained_on": init.get("trained_on"),
+        "data": cfg.data,
+        "days": cfg.days,
+        "frames": len(target),
+        "boxes": cfg.data_description["boxes"],
+        "source_data": list(cfg.source_data or []),
+        "poses": "none of the target's (adapted without 3D labels)",
+    }
+    config_dict = sectioned(dataclasses.asdict(cfg), trained_on)
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(json.dumps(config_dict, indent=2, default=str))
     print(f"precision: {student.precision().name}: {student.precision().reason}", file=sys.stderr)
@@ -364,10 +383,10 @@ def adapt(cfg: AdaptConfig) -> dict:
         sums: dict[str, float] = {}
         steps, t0 = 0, time.time()
         for _ in bar:
-            targets = [persons_of_sample(x, "boxed") for x in target.take(cfg.scenes_per_step)]
-            targets = [p for p in targets if p.person_ids.numel()]
-            labelled = [persons_of_sample(x, "annotated") for x in source.take(cfg.source_per_step)]
-            labelled = [p for p in labelled if p.person_ids.numel()]
+            targets = [Scene.from_sample(x, "boxed") for x in target.take(cfg.scenes_per_step)]
+            targets = [p for p in targets if p.num_persons]
+            labelled = [Scene.from_sample(x, "annotated") for x in source.take(cfg.source_per_step)]
+            labelled = [p for p in labelled if p.num_persons]
             if not targets:
                 continue
             lr = schedule.begin(optimiser)

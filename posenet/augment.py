@@ -46,6 +46,12 @@ class AugmentConfig:
     contrast: float = 0.25
     saturation: float = 0.25
     occlude: float = 0.0  # probability per network image of one random occluder (an extension; paper: none)
+    # Detector-like boxes (issue 13; an extension, paper: none): probability per (person, view) box of replacing
+    # the reference box by one as a detector might give it (see detector_like_boxes); 0 keeps reference boxes.
+    box_noise: float = 0.0
+    box_side_std: float = 0.08  # each side moves by N(0, std x the box's width or height)
+    box_truncate: float = 0.25  # share of the noisy boxes with one side cut by 10-40 % (a partly seen person)
+    box_merge: float = 0.1  # share of the noisy boxes grown to hold another person's box of that view too
 
 
 # ----------------------------------------------------------------------------- affine building blocks
@@ -183,6 +189,59 @@ def occluders(images: Tensor, probability: float, generator: torch.Generator | N
     out = images.clone()
     out[:, :-1] = torch.where(inside, noise.expand(N, C - 1, H, W), images[:, :-1])
     return out
+
+
+def detector_like_boxes(
+    boxes: Tensor,
+    has_box: Tensor,
+    sizes: list[tuple[int, int]],
+    config: AugmentConfig,
+    generator: torch.Generator | None = None,
+) -> Tensor:
+    """Reference boxes made to look like a detector's, so that the network learns to tolerate them.
+
+    Each box is, with probability ``config.box_noise``, moved side by side (N(0, ``box_side_std`` x its width or
+    height): shifted, too large or too small); a share of those loses 10-40 % on one side (truncated), and a
+    share grows to the hull of itself and another person's box in the same view (two persons in one box). Boxes
+    stay within their image and at least 2 px wide and high.
+
+    Args:
+        boxes: (P, V, 4) xyxy pixels; has_box: (P, V) bool; sizes: V (width, height) of the views' images.
+
+    Returns:
+        (P, V, 4): the new boxes (the others, and those without ``has_box``, unchanged).
+    """
+    P, V = has_box.shape
+    if config.box_noise <= 0 or P == 0:
+        return boxes
+    u = lambda *shape: torch.rand(*shape, generator=generator)  # noqa: E731
+    out = boxes.clone()
+    noisy = has_box & (u(P, V) < config.box_noise)
+    wh = (boxes[..., 2:] - boxes[..., :2]).repeat(1, 1, 2)  # (P, V, 4): w, h, w, h
+    out = out + torch.randn(P, V, 4, generator=generator) * config.box_side_std * wh * noisy[..., None]
+    # truncation: one side (x0, y0, x1 or y1) moves inwards by 10-40 % of the box
+    cut = noisy & (u(P, V) < config.box_truncate)
+    side = torch.randint(0, 4, (P, V), generator=generator)
+    inwards = torch.tensor([1.0, 1.0, -1.0, -1.0])[side] * (0.1 + 0.3 * u(P, V))  # (P, V)
+    amount = inwards * wh.gather(-1, side[..., None])[..., 0] * cut
+    out.scatter_add_(-1, side[..., None], amount[..., None])
+    # two persons in one box: the hull with a random other person's box of the same view
+    if P > 1:
+        merge = noisy & (u(P, V) < config.box_merge)
+        other = (
+            torch.arange(P)[:, None] + torch.randint(1, P, (P, V), generator=generator)
+        ) % P  # (P, V) != p
+        other_box = boxes.gather(0, other[..., None].expand(P, V, 4))
+        merge &= has_box.gather(0, other)
+        hull = torch.cat([torch.minimum(out[..., :2], other_box[..., :2]),
+                          torch.maximum(out[..., 2:], other_box[..., 2:])], -1)  # fmt: skip
+        out = torch.where(merge[..., None], hull, out)
+    limit = torch.tensor([[w - 1.0, h - 1.0] for w, h in sizes]).repeat(1, 2)  # (V, 4)
+    out = torch.minimum(out.clamp(min=0.0), limit)
+    # keep boxes valid: at least 2 px each way (a box pushed off the image keeps a sliver at its edge)
+    out[..., 2:] = torch.maximum(out[..., 2:], out[..., :2] + 2.0)
+    out[..., :2] = torch.minimum(out[..., :2], out[..., 2:] - 2.0)
+    return torch.where(noisy[..., None], out, boxes)
 
 
 def color_jitter(rgb: Tensor, config: AugmentConfig, generator: torch.Generator | None = None) -> Tensor:

@@ -155,7 +155,7 @@ def box_heatmaps(model, views: list, boxes: Sequence[np.ndarray], inputs: InputC
     """Run ``model`` (a ``PoseNet``) once on every box of a frame; see the module docstring.
 
     Args:
-        views: V tuples ``(color or None, depth, Camera)`` as ``posenet.inputs.build_scene`` takes them.
+        views: V :class:`posenet.scene.SceneView`\\ s, as ``posenet.inputs.build_scene`` takes them.
         boxes: V arrays ``(K_v, 4)`` xyxy pixels of those views (K_v may be 0).
     """
     if len(boxes) != len(views):

@@ -36,6 +36,7 @@ def measure(model, data: Path, annotations: Path | None, days: list[int] | None,
     """Per annotated, predicted joint of ``data``'s ``days``: ``spread_mm``, ``joint``, ``support``, ``error_mm``
     (all (N,)). Cached in ``cache`` (keyed by the weights, the data and the days) when given."""
     from posenet.data.mvor import load_annotations
+    from posenet.infer import PoseEstimator
     from posenet.predict import predict_samples, read_dataset
 
     annotations = annotations or data / "annotations.json"
@@ -48,7 +49,7 @@ def measure(model, data: Path, annotations: Path | None, days: list[int] | None,
             return dict(np.load(key))
     gt = load_annotations(annotations)
     dataset = read_dataset(data, gt, model.config.inputs, days)
-    preds = predict_samples(model, dataset, which="annotated")
+    preds = predict_samples(PoseEstimator(model, device=None), dataset, which="annotated")
     m = match_predictions(gt, preds, days=days)
     spread = np.full((len(m.records), NUM_JOINTS), np.nan)  # (N, J)
     for i, record in enumerate(m.records):

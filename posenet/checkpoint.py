@@ -1,8 +1,9 @@
-"""Saving and loading pose-network checkpoints: safetensors weights, the resolved config in json beside them.
+"""Saving and loading pose-network checkpoints, in the layout both stages share (``posenet.checkpoint_files``).
 
 A checkpoint is a folder ``CKPT/`` holding ``model.safetensors`` (the :class:`posenet.model.PoseNet` weights),
-``config.json`` (the resolved training config: preset, modality, input size, model, augmentation, data)
-and, for resuming, ``train_state.pt`` (epoch, optimiser, scheduler, best score). A run folder holds ``last/``
+``config.json`` (``"model"``: the model config; ``"train"``: the resolved training config (preset, data,
+augmentation, data description); ``"trained_on"``; ``"calibration"`` once ``posenet.calibrate`` has fitted one)
+and, for resuming, ``train_state.pt`` (epoch, optimiser, schedule, best score). A run folder holds ``last/``
 and ``best/`` (by validation MPJPE). A bare ``NAME.safetensors`` with ``NAME.json`` beside it (the shipped
 default weights, ``posenet/weights/default.safetensors``) loads the same way.
 """
@@ -13,8 +14,9 @@ import json
 from pathlib import Path
 
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load_file
 
+from posenet.checkpoint_files import CONFIG, WEIGHTS, checkpoint_config, write_checkpoint
 from posenet.model import ModelConfig, PoseNet
 
 DEFAULT_WEIGHTS = Path(__file__).parent / "weights" / "default.safetensors"
@@ -25,22 +27,30 @@ def save_checkpoint(
 ) -> Path:
     """Write ``model.safetensors`` + ``config.json`` (+ ``train_state.pt``) into ``folder`` and return it.
 
-    ``config`` must hold the model's resolved config under ``"model"`` (as ``dataclasses.asdict`` gives it).
-    Files are written beside and then renamed, so an interrupted save never leaves a half-written checkpoint.
+    ``config`` must hold the model's resolved config under ``"model"`` (as ``dataclasses.asdict`` gives it); the
+    training scripts build it with ``posenet.checkpoint_files.checkpoint_config``.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     if "model" not in config:
         raise ValueError("the checkpoint config must hold the model's config under 'model'")
-    weights = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
-    save_file(weights, folder / "model.safetensors.tmp")
-    (folder / "model.safetensors.tmp").replace(folder / "model.safetensors")
-    (folder / "config.json.tmp").write_text(json.dumps(config, indent=2, default=str))
-    (folder / "config.json.tmp").replace(folder / "config.json")
-    if train_state is not None:
-        torch.save(train_state, folder / "train_state.pt.tmp")
-        (folder / "train_state.pt.tmp").replace(folder / "train_state.pt")
+    write_checkpoint(folder, model.state_dict(), config, train_state)
     return folder
+
+
+def sectioned(flat: dict, trained_on: dict | str | None) -> dict:
+    """A training script's resolved config (``dataclasses.asdict`` of a ``TrainConfig`` or ``AdaptConfig``, its
+    model config under ``"model"``) as a checkpoint config: ``{"model", "train", "trained_on"}``."""
+    train = dict(flat)
+    return checkpoint_config(train.pop("model"), train, trained_on)
+
+
+def training_config(config: dict) -> dict:
+    """The inverse of :func:`sectioned`: the flat dict a ``TrainConfig`` or ``AdaptConfig`` is built from.
+
+    Pose configs from before the shared layout (``posenet/weights/default.json``) are flat already."""
+    train = config.get("train")
+    return {**train, "model": config.get("model")} if isinstance(train, dict) else config
 
 
 def checkpoint_files(path: str | Path | None) -> tuple[Path, Path]:
@@ -58,8 +68,8 @@ def checkpoint_files(path: str | Path | None) -> tuple[Path, Path]:
     path = Path(path)
     if path.is_dir():
         for sub in (path, path / "best", path / "last"):
-            if (sub / "model.safetensors").is_file():
-                return sub / "model.safetensors", sub / "config.json"
+            if (sub / WEIGHTS).is_file():
+                return sub / WEIGHTS, sub / CONFIG
         raise FileNotFoundError(f"{path} holds no model.safetensors (nor best/ or last/ with one)")
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint {path} does not exist")

@@ -3,7 +3,8 @@
 Usage::
 
     est = PoseEstimator.from_checkpoint("runs/fold4/best")          # None -> the shipped default weights
-    pred = est.predict(views, person_boxes)                        # views: V x (color, depth, Camera)
+    scene = Scene.from_person_boxes(views, person_boxes)            # views: V SceneViews; posenet.scene
+    pred = est.predict(scene)                                      # or a list of scenes, in one U-Net pass
     pred.joints      # (P, J, 3) mm, reference (camera 0) frame
     pred.spread_mm   # (P, J) mm: the spread of each joint's 3D point cloud (see posenet.lifting)
     pred.confidence  # (P, J) in [0, 1]: calibrated P(error <= 10 cm) (see posenet.calibration)
@@ -26,11 +27,11 @@ import torch
 
 from posenet.box_poses import BoxHeatmaps, box_heatmaps
 from posenet.calibration import Calibration
-from posenet.cameras import Camera
 from posenet.checkpoint import load_checkpoint
-from posenet.inputs import build_scene
+from posenet.inputs import SceneInput, build_scene
 from posenet.model import PoseNet, predict_scenes
 from posenet.runtime import Backend, export_onnx, load_runner
+from posenet.scene import Scene, SceneView
 
 Tensor = torch.Tensor
 
@@ -54,9 +55,11 @@ class PosePrediction:
 
 class PoseEstimator:
     def __init__(
-        self, model: PoseNet, config: dict | None = None, device: str | torch.device = "cpu"
+        self, model: PoseNet, config: dict | None = None, device: str | torch.device | None = "cpu"
     ) -> None:
-        self.device = torch.device(device)
+        """``model`` in eval mode on ``device`` (None: where it is, e.g. a model being trained); ``config``: its
+        checkpoint config, whose ``"calibration"`` turns spreads into confidences (``posenet.calibration``)."""
+        self.device = next(model.parameters()).device if device is None else torch.device(device)
         self.model = model.to(self.device).eval()
         self.config = config or {}
         self.calibration = Calibration.from_config(self.config)  # spread -> confidence
@@ -105,76 +108,69 @@ class PoseEstimator:
         """The precision the U-Net runs at here (the runtime's, when one runs it)."""
         return self.model.runner.precision if self.model.runner is not None else self.model.precision()
 
-    @staticmethod
-    def _boxes(person_boxes: Sequence[Sequence], V: int) -> tuple[Tensor, Tensor]:
-        P = len(person_boxes)
-        boxes = torch.zeros(P, V, 4)
-        has = torch.zeros(P, V, dtype=torch.bool)
-        for p, per_view in enumerate(person_boxes):
-            if len(per_view) != V:
-                raise ValueError(f"person {p} has {len(per_view)} box entries, expected one per view ({V})")
-            for v, box in enumerate(per_view):
-                if box is None:
-                    continue
-                b = torch.as_tensor(np.asarray(box, np.float32)).reshape(-1)
-                if b.shape != (4,) or not torch.isfinite(b).all() or b[2] <= b[0] or b[3] <= b[1]:
-                    raise ValueError(
-                        f"person {p}, view {v}: box must be finite xyxy with x1 > x0, y1 > y0, got {box}"
-                    )
-                boxes[p, v], has[p, v] = b, True
-        return boxes, has
-
-    def predict(
-        self,
-        views: Sequence[tuple[np.ndarray | None, np.ndarray, Camera]],
-        person_boxes: Sequence[Sequence],
-        return_heatmaps: bool = False,
-    ) -> PosePrediction:
-        """3D poses of P persons in one scene.
+    def predict(self, scenes: Scene | Sequence[Scene], return_heatmaps: bool = False):
+        """3D poses of the persons of one scene, or of several scenes in one U-Net pass.
 
         Args:
-            views: V tuples ``(color (H, W, 3) uint8 RGB or None, depth (H, W) uint16 mm, Camera)``.
-            person_boxes: P lists of V entries, each an xyxy box (pixels of that view) or None.
+            scenes: a :class:`posenet.scene.Scene` (its views, and its persons as boxes ``(P, V, 4)`` with the
+                ``(P, V)`` mask), or a sequence of them (batched together: one forward pass for all).
             return_heatmaps: also return the logits at the lifted points (for pictures).
+
+        Returns:
+            a :class:`PosePrediction` for one scene, a list of them (in order) for a sequence.
         """
-        V = len(views)
-        boxes, has_box = self._boxes(person_boxes, V)
+        single = isinstance(scenes, Scene)
+        batch = [scenes] if single else list(scenes)
+        run = [s for s in batch if s.num_persons]  # scenes without persons need no pass
+        inputs = self.model.config.inputs
+        kept: dict[int, SceneInput] = {}  # the network inputs, for return_heatmaps
+
+        def build(i: int, mirror: bool) -> SceneInput:
+            built = build_scene(run[i].views, run[i].boxes, run[i].has_box, inputs, mirror=mirror)
+            if return_heatmaps and not mirror:
+                kept[i] = built
+            return built
+
+        with torch.inference_mode():  # with flip averaging if the config asks for it
+            outs = iter(enumerate(predict_scenes(self.model, build, len(run)) if run else []))
+        preds = []
+        for scene in batch:
+            if scene.num_persons:
+                i, out = next(outs)
+                preds.append(self._prediction(scene, out, kept.get(i)))
+            else:
+                preds.append(self._empty())
+        return preds[0] if single else preds
+
+    def _empty(self) -> PosePrediction:
         J = self.model.config.unet.out_channels
-        if boxes.shape[0] == 0:
-            z = torch.zeros(0, J)
-            return PosePrediction(torch.zeros(0, J, 3), z, torch.zeros(0, dtype=torch.bool), z)
-        views = list(views)
-        scenes = {}
+        z = torch.zeros(0, J)
+        return PosePrediction(torch.zeros(0, J, 3), z, torch.zeros(0, dtype=torch.bool), z)
 
-        def build(_: int, mirror: bool):
-            scenes[mirror] = build_scene(views, boxes, has_box, self.model.config.inputs, mirror=mirror)
-            return scenes[mirror]
-
-        with torch.inference_mode():
-            out = predict_scenes(self.model, build, 1)[0]  # with flip averaging if the config asks for it
-        scene = scenes[False]
+    def _prediction(self, scene: Scene, out, inputs: SceneInput | None) -> PosePrediction:
+        """The prediction of ``scene`` from its network output ``out``; with its network ``inputs``, the
+        heatmaps at the lifted points too."""
+        spread = out.confidence.cpu()  # (P, J) mm: the lifting's spread
         pred = PosePrediction(
             out.joints.cpu(),
-            out.confidence.cpu(),  # the lifting's spread, mm
-            (out.has_points & has_box.any(1).to(out.has_points.device)).cpu(),
-            self.calibration(out.confidence.cpu(), has_box.sum(1)),
+            spread,
+            (out.has_points & scene.has_box.any(1).to(out.has_points.device)).cpu(),
+            self.calibration(spread, scene.support),  # (P, J) in [0, 1]
         )
-        if return_heatmaps:
+        if inputs is not None:
             pred.heatmaps, pred.uv, pred.depth, pred.valid = (
                 out.logits.cpu(),
-                scene.uv,
-                scene.depth,
-                scene.valid,
+                inputs.uv,
+                inputs.depth,
+                inputs.valid,
             )
         return pred
 
-    def box_heatmaps(
-        self, views: Sequence[tuple[np.ndarray | None, np.ndarray, Camera]], boxes: Sequence[np.ndarray]
-    ) -> BoxHeatmaps:
+    def box_heatmaps(self, views: Sequence[SceneView], boxes: Sequence[np.ndarray]) -> BoxHeatmaps:
         """The U-Net once on every box of a scene, before the boxes are grouped into persons.
 
         Args:
-            views: as :meth:`predict`.
+            views: V :class:`posenet.scene.SceneView`\\ s of one image size.
             boxes: V arrays ``(K_v, 4)`` xyxy pixels of each view (K_v may be 0).
 
         Returns:

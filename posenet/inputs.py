@@ -19,6 +19,7 @@ clipped to +-1.5, 0 where unknown) and a depth-valid flag. The paper's counts ar
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import cv2
@@ -26,8 +27,8 @@ import numpy as np
 import torch
 
 from posenet import augment as aug
-from posenet.boxes import person_ids
 from posenet.cameras import Camera
+from posenet.scene import SceneView
 
 Tensor = torch.Tensor
 MODALITIES = ("rgbd", "rgb", "depth")
@@ -178,7 +179,7 @@ def resize_view(
 
 
 def _stack_views(
-    views: list[tuple[np.ndarray | None, np.ndarray, Camera]],
+    views: Sequence[SceneView],
 ) -> tuple[Tensor | None, Tensor, Camera]:
     shapes = {v[1].shape for v in views}
     if len(shapes) != 1:
@@ -224,7 +225,7 @@ def _sample_per_view(images: Tensor, A: Tensor, P: int, size: tuple[int, int], m
 
 
 def build_scene(
-    views: list[tuple[np.ndarray | None, np.ndarray, Camera]],
+    views: Sequence[SceneView],
     boxes: Tensor,
     has_box: Tensor,
     config: InputConfig,
@@ -235,7 +236,8 @@ def build_scene(
     """The network inputs and lifting points of one scene.
 
     Args:
-        views: V tuples ``(color (H, W, 3) uint8 or None, depth (H, W) uint16 mm, Camera)``, same size.
+        views: V :class:`posenet.scene.SceneView`\\ s ``(color (H, W, 3) uint8 or None, depth (H, W) uint16 mm,
+            Camera)`` of one size: a :class:`posenet.scene.Scene`'s views.
         boxes: (P, V, 4) xyxy boxes in those images' pixels (ignored where ``has_box`` is False).
         has_box: (P, V) bool.
         config: the input configuration.
@@ -324,58 +326,3 @@ def build_scene(
         grid_in_box = _in_box(uv.expand(P, V, H * W, 2).reshape(P * V, H * W, 2), safe)  # (P*V, H*W)
         valid = grid_in_box.view(P, V, H * W) & has_box.view(P, V, 1) & (d > 0)
     return SceneInput(images, A, flipped, has_box, cameras, uv, d, valid, (W, H), config.mode)
-
-
-@dataclass
-class ScenePersons:
-    """The persons of one :class:`posenet.data.sample.Sample` to run, their boxes and (maybe) their truth.
-
-    Attributes:
-        views: V ``(color or None, depth, Camera)`` tuples, as :func:`build_scene` takes them.
-        boxes: (P, V, 4) xyxy; has_box: (P, V) bool; person_ids: (P,) int64.
-        poses: (P, J, 3) mm and valid (P, J) bool; for persons without a 3D pose, zeros and False.
-    """
-
-    views: list
-    boxes: Tensor
-    has_box: Tensor
-    person_ids: Tensor
-    poses: Tensor
-    valid: Tensor
-
-
-def persons_of_sample(sample, which: str = "annotated") -> ScenePersons:
-    """The persons of a ``Sample``: ``"annotated"`` = its 3D poses that have a box in some view (training,
-    validation); ``"boxed"`` = every person of ``posenet.boxes.person_ids`` (prediction)."""
-    if any(v.depth is None for v in sample.views):
-        raise ValueError(f"sample {sample.id}: every view needs a depth image (load the dataset with depth)")
-    views = [(v.color, v.depth, v.camera) for v in sample.views]
-    J = sample.poses.shape[1] if sample.poses.ndim == 3 else 10
-    if which == "annotated":
-        ids = [int(i) for i in sample.person_ids]
-        poses, valid = sample.poses, sample.valid
-    elif which == "boxed":
-        ids = person_ids([v.box_person_ids for v in sample.views])
-        index = {int(pid): k for k, pid in enumerate(sample.person_ids)}
-        # Persons without a 3D pose (or frames with no identified person at all) get zeros and False.
-        poses, valid = np.zeros((len(ids), J, 3), np.float32), np.zeros((len(ids), J), bool)
-        for p, i in enumerate(ids):
-            if i in index:
-                poses[p], valid[p] = sample.poses[index[i]], sample.valid[index[i]]
-    else:
-        raise ValueError(f"which must be 'annotated' or 'boxed', got {which!r}")
-    boxes = np.zeros((len(ids), len(views), 4), np.float32)
-    has_box = np.zeros((len(ids), len(views)), bool)
-    for p, pid in enumerate(ids):
-        for v, box in enumerate(sample.person_boxes(pid)):
-            if box is not None:
-                boxes[p, v], has_box[p, v] = box, True
-    keep = has_box.any(1)
-    return ScenePersons(
-        views,
-        torch.from_numpy(boxes[keep]),
-        torch.from_numpy(has_box[keep]),
-        torch.tensor(ids, dtype=torch.int64)[torch.from_numpy(keep)],
-        torch.from_numpy(np.asarray(poses, np.float32)[keep]),
-        torch.from_numpy(np.asarray(valid, bool)[keep]),
-    )

@@ -21,53 +21,36 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
-from posenet.calibration import Calibration
-from posenet.checkpoint import load_checkpoint
 from posenet.evaluate import prediction_record
 from posenet.execution import PRECISIONS
-from posenet.inputs import InputConfig, build_scene, persons_of_sample, reduction
-from posenet.model import PoseNet, predict_scenes
+from posenet.infer import PoseEstimator
+from posenet.inputs import InputConfig, reduction
+from posenet.scene import Scene
 
 
-def predict_samples(
-    model: PoseNet,
-    samples,
-    scenes_per_batch: int = 4,
-    which: str = "boxed",
-    progress: bool = True,
-    calibration: Calibration | None = None,
-):
-    """Predictions (evaluator format) for an iterable of ``Sample``s; ``scenes_per_batch`` scenes share one
-    U-Net pass. ``which``: ``"boxed"`` predicts every boxed person, ``"annotated"`` those with a 3D pose.
-    ``calibration`` turns the spreads into confidences (None: the fallback curve of ``posenet.calibration``)."""
-    model.eval()
-    calibration = calibration or Calibration()
+def predict_samples(estimator: PoseEstimator, samples, scenes_per_batch: int = 4, which: str = "boxed",
+                    progress: bool = True) -> list[dict]:  # fmt: skip
+    """Predictions (evaluator format) for an iterable of ``Sample``\\ s, by ``estimator.predict``:
+    ``scenes_per_batch`` scenes share one U-Net pass, and the estimator's calibration gives the confidences.
+    ``which``: ``"boxed"`` predicts every boxed person, ``"annotated"`` those with a 3D pose
+    (:meth:`posenet.scene.Scene.from_sample`)."""
     preds: list[dict] = []
-    pending: list[tuple] = []
+    pending: list[Scene] = []
 
     def flush() -> None:
-        if not pending:
-            return
-
-        def build(i: int, mirror: bool):
-            p = pending[i][1]
-            return build_scene(p.views, p.boxes, p.has_box, model.config.inputs, mirror=mirror)
-
-        with torch.inference_mode():
-            outs = predict_scenes(model, build, len(pending))
-        for (sample_id, persons), out in zip(pending, outs, strict=True):
-            spread = out.confidence.cpu()  # (P, J) mm: the lifting's spread
-            confidence = calibration(spread, persons.has_box.sum(1))  # (P, J)
-            for k, pid in enumerate(persons.person_ids.tolist()):
-                if not bool(out.has_points[k]):
+        for scene, pred in zip(pending, estimator.predict(pending), strict=True):
+            for k, pid in enumerate(scene.person_ids.tolist()):
+                if not bool(pred.has_points[k]):
                     continue  # no pixel with depth in any of its boxes: nothing to lift
-                preds.append(prediction_record(sample_id, pid, out.joints[k].cpu(), spread[k], confidence[k]))
+                preds.append(
+                    prediction_record(scene.id, pid, pred.joints[k], pred.spread_mm[k], pred.confidence[k])
+                )
         pending.clear()
 
     for sample in tqdm(samples, desc="predict", disable=not progress, leave=False):
-        persons = persons_of_sample(sample, which)
-        if persons.person_ids.numel():
-            pending.append((sample.id, persons))
+        scene = Scene.from_sample(sample, which)
+        if scene.num_persons:
+            pending.append(scene)
         if len(pending) >= scenes_per_batch:
             flush()
     flush()
@@ -129,11 +112,11 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
-    model, config = load_checkpoint(args.checkpoint, args.device, args.precision)
+    estimator = PoseEstimator.from_checkpoint(args.checkpoint, args.device, args.precision)
     if args.flip_test is not None:
-        model.config.flip_test = args.flip_test
-    data = read_dataset(args.data, args.annotations, model.config.inputs, args.days)
-    preds = predict_samples(model, data, args.scenes_per_batch, calibration=Calibration.from_config(config))
+        estimator.model.config.flip_test = args.flip_test
+    data = read_dataset(args.data, args.annotations, estimator.model.config.inputs, args.days)
+    preds = predict_samples(estimator, data, args.scenes_per_batch)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(preds))
     print(f"wrote {len(preds)} predictions for {len(data)} frames to {args.out}", file=sys.stderr)

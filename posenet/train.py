@@ -35,13 +35,14 @@ import torch
 import torch.distributed as dist
 from tqdm import tqdm
 
-from posenet.augment import AugmentConfig
+from posenet.augment import AugmentConfig, detector_like_boxes
 from posenet.boxes import person_ids
-from posenet.checkpoint import save_checkpoint
+from posenet.checkpoint import save_checkpoint, sectioned, training_config
 from posenet.execution import PRECISIONS
-from posenet.inputs import InputConfig, build_scene, persons_of_sample, record_read_size
+from posenet.inputs import InputConfig, build_scene, record_read_size
 from posenet.loss import mpjpe, reprojection_2d
 from posenet.model import ModelConfig, PoseNet
+from posenet.scene import Scene
 from posenet.schedule import Schedule, lr_factor  # noqa: F401  (lr_factor: posenet.train's public name)
 
 
@@ -93,7 +94,7 @@ class TrainConfig:
 
     @staticmethod
     def from_dict(d: dict) -> TrainConfig:
-        d = dict(d)
+        d = dict(training_config(d))
         d["model"] = (
             ModelConfig.from_dict(d["model"])
             if isinstance(d.get("model"), dict)
@@ -138,6 +139,8 @@ def resolve_config(args: argparse.Namespace) -> TrainConfig:
         augment["rotate_deg"] = args.rotate
     if args.occlude is not None:
         augment["occlude"] = args.occlude
+    if args.box_noise is not None:
+        augment["box_noise"] = args.box_noise
     top = {f.name for f in dataclasses.fields(TrainConfig)} - {
         "model",
         "augment",
@@ -207,9 +210,10 @@ def scene_loss(model_config: ModelConfig, out, persons, cameras) -> torch.Tensor
 def validate(model: PoseNet, annotations: dict, dataset, days) -> dict:
     """MPJPE on the held-out day with posenet.evaluate (cm), plus the plain mean in mm."""
     from posenet.evaluate import evaluate
+    from posenet.infer import PoseEstimator
     from posenet.predict import predict_samples
 
-    preds = predict_samples(model, dataset, which="annotated", progress=False)
+    preds = predict_samples(PoseEstimator(model, device=None), dataset, which="annotated", progress=False)
     result = evaluate(annotations, preds, days=days)
     return {
         "val_mpjpe_cm": result["overall"],
@@ -358,7 +362,16 @@ def train(cfg: TrainConfig) -> dict:
         if rank == 0:
             print(f"resuming {out} at epoch {start_epoch} (best {best:.2f} cm)", file=sys.stderr)
     net = torch.nn.parallel.DistributedDataParallel(model) if world > 1 else model
-    config_dict = dataclasses.asdict(cfg)
+    trained_on = {
+        "data": cfg.data,
+        "days": train_days,
+        "frames": len(frames),
+        "extra_data": list(cfg.extra_data),
+        "extra_frames": extra_frames,
+        "subsample": cfg.subsample,
+        "init": cfg.init,
+    }
+    config_dict = sectioned(dataclasses.asdict(cfg), trained_on)
     if rank == 0:
         out.mkdir(parents=True, exist_ok=True)
         (out / "config.json").write_text(json.dumps(config_dict, indent=2, default=str))
@@ -378,13 +391,16 @@ def train(cfg: TrainConfig) -> dict:
         bar = tqdm(loader, desc=desc, disable=rank != 0, leave=False)
         running, seen, crops, t0 = None, 0, 0, time.time()
         for samples in bar:
-            persons = [persons_of_sample(s, "annotated") for s in samples]
-            persons = [p for p in persons if p.person_ids.numel()]
+            persons = [Scene.from_sample(s, "annotated") for s in samples]
+            persons = [p for p in persons if p.num_persons]
             if not persons:
                 continue
             lr = schedule.begin(optimiser)
             scenes = [
-                build_scene(p.views, p.boxes, p.has_box, cfg.model.inputs, cfg.augment, gen) for p in persons
+                build_scene(
+                    p.views, detector_like(p, cfg.augment, gen), p.has_box, cfg.model.inputs, cfg.augment, gen
+                )
+                for p in persons
             ]
             outs = net(scenes)
             losses = [
@@ -566,6 +582,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--color", action=argparse.BooleanOptionalAction, help="brightness/contrast/saturation jitter"
     )
     g.add_argument("--occlude", type=float, help="probability of an occluder per crop (extension; 0: off)")
+    g.add_argument(
+        "--box-noise",
+        type=float,
+        help="probability per box of a detector-like box instead of the reference one: shifted, too large or "
+        "small, truncated, or holding a second person (extension for detector mode; 0: off)",
+    )
     g = p.add_argument_group("runtime")
     g.add_argument("--threads", type=int, help="torch CPU threads")
     g.add_argument("--device", help="cpu or cuda (default: cuda if available)")
@@ -593,6 +615,14 @@ def run_config(args: argparse.Namespace, from_dict, resume_keys: tuple[str, ...]
             f"{out} already holds a run; pass --resume to continue it or choose another --out"
         )
     return fresh()
+
+
+def detector_like(scene, augment: AugmentConfig, generator: torch.Generator) -> torch.Tensor:
+    """The scene's (P, V, 4) boxes, made detector-like with ``augment.box_noise`` (``posenet.augment``)."""
+    if augment.box_noise <= 0:
+        return scene.boxes
+    sizes = [(v.depth.shape[1], v.depth.shape[0]) for v in scene.views]
+    return detector_like_boxes(scene.boxes, scene.has_box, sizes, augment, generator)
 
 
 def main(argv: list[str] | None = None) -> int:

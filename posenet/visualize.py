@@ -162,8 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from posenet.inputs import persons_of_sample
     from posenet.predict import read_dataset
+    from posenet.scene import Scene
 
     est = PoseEstimator.from_checkpoint(args.checkpoint)
     data = read_dataset(args.data, args.annotations, est.model.config.inputs, args.days)
@@ -171,18 +171,16 @@ def main(argv: list[str] | None = None) -> int:
     if not 0 <= index < len(data):
         raise ValueError(f"--frame {args.frame}: the dataset has {len(data)} frames")
     sample = data[index]
-    persons = persons_of_sample(sample, "boxed")
-    if persons.person_ids.numel() == 0:
+    scene = Scene.from_sample(sample, "boxed")
+    if scene.num_persons == 0:
         raise ValueError(f"frame {sample.id} has no boxed person to draw")
     boxes = [
         [b.tolist() if h else None for b, h in zip(pb, ph, strict=True)]
-        for pb, ph in zip(persons.boxes, persons.has_box, strict=True)
+        for pb, ph in zip(scene.boxes, scene.has_box, strict=True)
     ]
-    pred = est.predict(persons.views, boxes, return_heatmaps=True)
+    pred = est.predict(scene, return_heatmaps=True)
     person = min(max(args.person, 0), len(boxes) - 1)
-    out = draw(
-        sample, pred, boxes, persons.person_ids.tolist(), person, args.out, est.model.config.inputs.mode
-    )
+    out = draw(sample, pred, boxes, scene.person_ids.tolist(), person, args.out, est.model.config.inputs.mode)
     print(f"wrote {out} (frame {sample.id}, {len(boxes)} persons)", file=sys.stderr)
     return 0
 

@@ -1,7 +1,8 @@
 """What ``GET /model`` says: the joints, what the pose network reads, its input size, and the training data.
 
 The training data is read from the checkpoints' own configs (the resolved config saved beside the weights), so
-the answer describes the weights actually loaded rather than what a deployment claims.
+the answer describes the weights actually loaded rather than what a deployment claims: their ``"trained_on"``
+section (``posenet.checkpoint_files``), written by ``posenet.train``, ``posenet.adapt`` and ``detector.train``.
 """
 
 from __future__ import annotations
@@ -11,7 +12,8 @@ from posenet.skeleton import JOINTS
 from service.pipeline import ScenePipeline
 from service.schemas import ModelInfo, Runtime
 
-# Config keys that say what a model saw in training, in the order they are reported.
+# Checkpoints from before the shared layout (no "trained_on" section): the config keys that say what a model saw
+# in training, in the order they are reported.
 _DATA_KEYS = (
     "trained_on", "data", "extra_data", "dataset", "annotations", "days", "train_days", "holdout_day", "test_day",
     "train_frames", "extra_train_frames", "val_frames", "train_images", "subsample", "epochs", "steps", "preset",
@@ -20,8 +22,20 @@ _DATA_KEYS = (
 _SECTIONS = ("train", "data", "data_description")
 
 
+def _line(trained_on: dict | str) -> str:
+    if isinstance(trained_on, str):
+        return trained_on
+    return ", ".join(f"{key}={_line(value) if isinstance(value, dict) else value}" for key, value in trained_on.items()
+                     if value not in (None, [], ""))  # fmt: skip
+
+
 def summarise_training(config: dict) -> str:
-    """A one-line account of the training data in a checkpoint config, from whichever known keys it holds."""
+    """A one-line account of the training data in a checkpoint config: its ``"trained_on"`` section, else (an old
+    checkpoint) whichever known keys it holds."""
+    trained_on = config.get("trained_on")
+    if trained_on:
+        return _line(trained_on)
+    # Old checkpoints only: search the keys where the training scripts used to put the account.
     found = {}
     for section in (config, *(config.get(name) for name in _SECTIONS)):
         if isinstance(section, dict):

@@ -18,26 +18,14 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 import torch
 
 from posenet.boxes import ground_truth_ids, hull, identified
-from posenet.cameras import Camera
 from posenet.data.sample import Sample
 from posenet.evaluate import prediction_record
-
-
-class FrameView(NamedTuple):
-    """One view of a frame, in the form ``PoseEstimator.predict`` takes.
-
-    color: (H, W, 3) uint8 RGB or None; depth: (H, W) uint16 mm (0 = unknown); camera: its unbatched Camera.
-    """
-
-    color: np.ndarray | None
-    depth: np.ndarray
-    camera: Camera
+from posenet.scene import Scene, SceneView, views_of
 
 
 @dataclass
@@ -119,7 +107,8 @@ class ScenePipeline:
     """Detector (optional) + cross-view matcher + pose network, run on one frame at a time.
 
     Args:
-        pose: a ``posenet.infer.PoseEstimator`` (anything with its ``predict(views, person_boxes)``).
+        pose: a ``posenet.infer.PoseEstimator`` (anything with its ``predict(scene)``, ``box_heatmaps`` and
+            ``calibration``).
         detector: a ``detector.infer.PersonDetector``, or None for reference-box mode only.
         config: matching settings.
     """
@@ -194,7 +183,7 @@ class ScenePipeline:
         return cls(pose, detector, config, read_config(detector_checkpoint or DEFAULT_WEIGHTS))
 
     # ----------------------------------------------------------------------------------------- stages
-    def _combination_bound(self, boxes: list[np.ndarray], views: list[FrameView]) -> float:
+    def _combination_bound(self, boxes: list[np.ndarray], views: list[SceneView]) -> float:
         """An upper bound on the combinations the centre matcher will enumerate (``combination_bound``)."""
         from detector.matching import box_centres_3d, combination_bound
 
@@ -219,7 +208,7 @@ class ScenePipeline:
                 )
         return limit, why
 
-    def _match(self, boxes: list[np.ndarray], views: list[FrameView]) -> list[list[int]]:
+    def _match(self, boxes: list[np.ndarray], views: list[SceneView]) -> list[list[int]]:
         """Group boxes across views by their 3D centres: per person, per view a box index or -1."""
         from detector.matching import match_boxes
 
@@ -240,7 +229,7 @@ class ScenePipeline:
 
     def run(
         self,
-        views: list[FrameView],
+        views: list[SceneView],
         boxes: list[np.ndarray] | None = None,
         person_ids: list[np.ndarray] | None = None,
     ) -> SceneResult:
@@ -303,7 +292,8 @@ class ScenePipeline:
             if heat is not None:
                 prediction = heat.estimate(members)
             else:
-                prediction = self.pose.predict(list(views), [p.boxes for p in persons])
+                scene = Scene.from_person_boxes(views, [p.boxes for p in persons], [p.id for p in persons])
+                prediction = self.pose.predict(scene)
             joints = np.asarray(prediction.joints, dtype=np.float64)  # (P, J, 3)
             spread = torch.as_tensor(prediction.spread_mm, dtype=torch.float64).cpu()  # (P, J) mm
             support = torch.tensor([len(p.support) for p in persons])  # (P,)
@@ -337,7 +327,7 @@ class ScenePipeline:
         boxes = [b[k] for b, k in zip(boxes, keep, strict=True)]
         return boxes, [s[k] for s, k in zip(scores, keep, strict=True)]
 
-    def _match_skeletons(self, boxes: list[np.ndarray], views: list[FrameView]):
+    def _match_skeletons(self, boxes: list[np.ndarray], views: list[SceneView]):
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
         Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds spent after
@@ -358,7 +348,7 @@ class ScenePipeline:
         the id of the annotated person whose boxes it overlaps most (the paper's rule,
         ``posenet.boxes.ground_truth_ids``); persons that overlap nobody are left out of the predictions.
         """
-        views = [FrameView(v.color, v.depth, v.camera) for v in sample.views]
+        views = views_of(sample)
         if reference_boxes:
             boxes, ids = zip(*(identified(v.boxes, v.box_person_ids) for v in sample.views), strict=True)
             result = self.run(views, list(boxes), list(ids))

@@ -17,9 +17,9 @@ import torch
 
 from posenet.cameras import Camera, is_rigid
 from posenet.inputs import reduction
+from posenet.scene import SceneView
 from service.decode import decode_color, decode_depth, header_size
 from service.errors import InputError
-from service.pipeline import FrameView
 from service.schemas import SceneIn, ViewIn
 
 
@@ -40,7 +40,8 @@ class ValidatedScene:
     """A request ready for :meth:`service.pipeline.ScenePipeline.run`.
 
     Attributes:
-        views: V views (colour (H, W, 3) uint8 RGB or None, depth (H, W) uint16 mm, Camera).
+        views: V :class:`posenet.scene.SceneView`\\ s (colour (H, W, 3) uint8 RGB or None, depth (H, W) uint16 mm,
+            Camera).
         boxes: per view (K_v, 4) float32 xyxy reference boxes, or None for detector mode.
         person_ids: per view (K_v,) int64 client identities of the boxes, or None (match across views).
         sent_boxes: per view (K_v, 4) float64 boxes as the client sent them (``boxes`` is clipped to the
@@ -49,7 +50,7 @@ class ValidatedScene:
             ``boxes`` are in those reduced pixels (u' = (u + 0.5) / k - 0.5, as ``Camera.scale``).
     """
 
-    views: list[FrameView]
+    views: list[SceneView]
     boxes: list[np.ndarray] | None
     person_ids: list[np.ndarray] | None
     sent_boxes: list[np.ndarray] | None = None
@@ -229,7 +230,7 @@ def _validated(
             why = "detection needs colour" if not reference_mode else "the pose network reads colour"
             raise InputError(f"missing file part color_{i} ({why}); send a PNG or JPEG colour image")
         camera = _camera(view, i, width, height)
-        views.append(FrameView(color, depth, camera if k == 1 else camera.scale(1 / k)))
+        views.append(SceneView(color, depth, camera if k == 1 else camera.scale(1 / k)))
         boxes, ids = _boxes(view, i, width, height, limits)
         all_boxes.append(boxes if k == 1 else ((boxes + 0.5) / k - 0.5).astype(np.float32))
         all_ids.append(ids)

@@ -27,9 +27,10 @@ from posenet.augment import AugmentConfig
 from posenet.checkpoint import save_checkpoint
 from posenet.data.mvor import MvorDataset, load_annotations
 from posenet.infer import PoseEstimator
-from posenet.inputs import InputConfig, build_scene, persons_of_sample
+from posenet.inputs import InputConfig, build_scene
 from posenet.loss import mpjpe
 from posenet.model import ModelConfig, PoseNet, PoseOutput
+from posenet.scene import Scene, views_of
 from posenet.skeleton import BONES
 
 TINY_MODEL = ModelConfig(inputs=InputConfig(crop_size=32), base=8, depth=2, precision="fp32")
@@ -88,7 +89,7 @@ def test_a_file_without_3d_poses_adapts_and_gives_the_same_weights(tiny, tmp_pat
         np.isfinite(log[0][k]) for k in ("consistency", "pseudo", "bones", "source")
     )
     saved = json.loads((tmp_path / "no3d" / "config.json").read_text())
-    assert saved["model"]["base"] == 8 and len(saved["bone_stats"]["mean"]) == len(BONES)
+    assert saved["model"]["base"] == 8 and len(saved["train"]["bone_stats"]["mean"]) == len(BONES)
     assert _weights(tmp_path / "no3d") != (tiny["init"] / "model.safetensors").read_bytes()  # it did learn
 
 
@@ -199,7 +200,7 @@ def test_bone_statistics_and_loss():
 def test_ema_update_is_the_moving_average_of_every_weight_and_buffer(tiny):
     torch.manual_seed(0)
     teacher, student = PoseNet(TINY_MODEL), PoseNet(TINY_MODEL)
-    p = persons_of_sample(MvorDataset(tiny["source"], tiny["source"] / "annotations.json")[0])
+    p = Scene.from_sample(MvorDataset(tiny["source"], tiny["source"] / "annotations.json")[0])
     student.train()(
         build_scene(p.views, p.boxes, p.has_box, TINY_MODEL.inputs)
     )  # moves BatchNorm's statistics
@@ -226,8 +227,8 @@ def test_one_step_has_every_loss_and_finite_gradients(tiny):
         bone_stats={"mean": [150.0] * len(BONES), "std": [20.0] * len(BONES)}, pseudo_max_uncertainty=1e9,
     )  # fmt: skip
     gt = load_target_annotations(cfg)
-    targets = [persons_of_sample(s, "boxed") for s in MvorDataset(tiny["target"], gt, poses=False, days=[1])]
-    sources = [persons_of_sample(MvorDataset(tiny["source"], tiny["source"] / "annotations.json")[0])]
+    targets = [Scene.from_sample(s, "boxed") for s in MvorDataset(tiny["target"], gt, poses=False, days=[1])]
+    sources = [Scene.from_sample(MvorDataset(tiny["source"], tiny["source"] / "annotations.json")[0])]
     assert all(p.poses.abs().sum() == 0 for p in targets)  # nothing to supervise with
     losses = adapt_step(student, teacher, targets, sources, cfg, torch.Generator().manual_seed(0))
     assert set(losses.parts) == {"consistency", "pseudo", "bones", "source"}
@@ -285,9 +286,8 @@ def test_the_result_loads_like_any_pose_checkpoint(tiny, tmp_path, monkeypatch):
     run = tmp_path / "run"
     assert adapt_main(_args(tiny, run, "no3d", "--epochs", "1", "--consistency", "0", "--bones", "0")) == 0
     sample = MvorDataset(tiny["target"], tiny["no3d"], poses=False)[0]
-    views = [(v.color, v.depth, v.camera) for v in sample.views]
-    boxes = [sample.person_boxes(0)]
-    pred = PoseEstimator.from_checkpoint(run, precision="fp32").predict(views, boxes)
+    scene = Scene.from_person_boxes(views_of(sample), [sample.person_boxes(0)])
+    pred = PoseEstimator.from_checkpoint(run, precision="fp32").predict(scene)
     assert pred.joints.shape == (1, 10, 3) and torch.isfinite(pred.joints).all()
     # the service: ORPOSE_POSE_CHECKPOINT=RUN
     from service.pipeline import ScenePipeline
@@ -297,7 +297,7 @@ def test_the_result_loads_like_any_pose_checkpoint(tiny, tmp_path, monkeypatch):
     pipeline = ScenePipeline.from_checkpoints(
         Settings().pose_checkpoint, load_detector=False, precision="fp32"
     )
-    served = pipeline.pose.predict(views, boxes)
+    served = pipeline.pose.predict(scene)
     torch.testing.assert_close(served.joints, pred.joints)
     # posenet.predict
     from posenet.predict import main as predict_main

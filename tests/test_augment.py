@@ -144,3 +144,36 @@ def test_unflip_mixed_batch_matches_per_sample_permutation():
     torch.testing.assert_close(
         aug.unflip_channels(out, torch.tensor([True, False, True])), x
     )  # an involution
+
+
+def test_detector_like_boxes_stay_valid_and_leave_the_rest_alone():
+    detector_like_boxes = aug.detector_like_boxes
+    g = torch.Generator().manual_seed(3)
+    P, V, sizes = 6, 3, [(640, 480), (320, 240), (640, 480)]
+    x0 = torch.rand(P, V, 2, generator=g) * 200
+    boxes = torch.cat([x0, x0 + 40 + torch.rand(P, V, 2, generator=g) * 150], -1)
+    has = torch.rand(P, V, generator=g) < 0.7
+    assert torch.equal(
+        detector_like_boxes(boxes, has, sizes, aug.AugmentConfig(), g), boxes
+    )  # off by default
+    cfg = aug.AugmentConfig(box_noise=1.0, box_truncate=0.5, box_merge=0.3)
+    outs = [detector_like_boxes(boxes, has, sizes, cfg, torch.Generator().manual_seed(s)) for s in range(50)]
+    again = detector_like_boxes(boxes, has, sizes, cfg, torch.Generator().manual_seed(0))
+    assert torch.equal(outs[0], again)  # deterministic for a seed
+    limit = torch.tensor([[w - 1.0, h - 1.0] for w, h in sizes]).repeat(1, 2)
+    merged = 0
+    for out in outs:
+        assert torch.equal(out[~has], boxes[~has])  # persons without a box in a view keep none
+        b = out[has]
+        assert (b[:, 2:] - b[:, :2] >= 2 - 1e-4).all() and (b >= 0).all()
+        assert (b <= limit.expand(P, V, 4)[has]).all()  # within the image
+        assert not torch.equal(out, boxes)
+        # two persons in one box: some box now holds another person's whole box of its view
+        for p in range(P):
+            for v in range(V):
+                others = [q for q in range(P) if q != p and has[q, v]]
+                merged += has[p, v] and any(
+                    (out[p, v, :2] <= boxes[q, v, :2]).all() and (out[p, v, 2:] >= boxes[q, v, 2:]).all()
+                    for q in others
+                )
+    assert merged > 0

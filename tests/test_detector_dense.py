@@ -110,10 +110,10 @@ def test_cli_dense_weight_and_extra_data_resume(dataset, tmp_path):
     assert log[-1]["loss_dense"] > 0 and "dense_focal" in log[-1]
     saved = json.loads((run / "config.json").read_text())
     assert saved["train"]["dense_weight"] == 1.0
-    trained_on = saved["detector"]["extra"]["trained_on"]
+    trained_on = saved["trained_on"]
     assert trained_on["days"] == [1] and trained_on["extra_data"] == [str(extra)]
     assert trained_on["views"] == 4 + 2
-    state = torch.load(run / "training_state.pt", weights_only=False)
+    state = torch.load(run / "train_state.pt", weights_only=False)
     assert state["dense"] is not None  # the dense head resumes too
     log2 = train_cli.main([*argv[:-2], "--epochs", "2", "--out", str(run), "--resume"])
     assert [e["epoch"] for e in log2] == [1, 2] and log2[-1]["loss_dense"] > 0
@@ -180,13 +180,13 @@ def test_export_sets_the_threshold_and_halves_the_file(dataset, tmp_path):
         ]
     )  # fmt: skip
     meta = read_config(out)
-    chosen = meta["detector"]["extra"]["threshold_chosen_on"]
+    chosen = meta["model"]["extra"]["threshold_chosen_on"]
     assert chosen["days"] == [1] and meta["trained_on"] == "tiny ellipses"
-    assert meta["detector"]["score_threshold"] == chosen["F1_50_threshold"]
+    assert meta["model"]["score_threshold"] == chosen["F1_50_threshold"]
     assert out.stat().st_size < 0.6 * (run / "model.safetensors").stat().st_size  # float16
     # The suppression IoU was chosen on the same days, among none and the default choices.
     assert set(chosen["nms_candidates"]) == {"none", "0.8", "0.7", "0.6", "0.5"}
-    assert meta["detector"]["nms_iou"] == chosen["nms_iou"]
+    assert meta["model"]["nms_iou"] == chosen["nms_iou"]
     full, half = PersonDetector.from_checkpoint(run), PersonDetector.from_checkpoint(out)
     full.cfg = replace(full.cfg, nms_iou=half.cfg.nms_iou)
     assert half.cfg.score_threshold == chosen["F1_50_threshold"]

@@ -50,6 +50,6 @@ def test_grouped_detections_feed_adaptation(tmp_path):
                        "--subsample", "1", "--threads", "1", "--epochs", "1"]) == 0  # fmt: skip
     config = json.loads((run / "config.json").read_text())
     assert (
-        config["data_description"]["boxes"].startswith("detector")
+        config["train"]["data_description"]["boxes"].startswith("detector")
         and (run / "last" / "model.safetensors").is_file()
     )

@@ -107,8 +107,8 @@ def test_rt_detr_cli_trains_saves_reloads_and_init_continues(dataset, tmp_path):
     cont = tmp_path / "cont"
     train_cli.main([*common, "--init", str(run), "--lr", "1e-5", "--out", str(cont)])
     saved = read_config(cont)
-    assert saved["detector"]["arch"] == "rt_detr" and saved["progress"]["step"] == log[-1]["step"]
-    assert saved["detector"]["extra"]["trained_on"]["init"] == str(run)
+    assert saved["model"]["arch"] == "rt_detr" and saved["progress"]["step"] == log[-1]["step"]
+    assert saved["trained_on"]["init"] == str(run)
     c = PersonDetector.from_checkpoint(cont, precision="fp32").detect(images, depths, score_threshold=0.0)
     assert any(not np.array_equal(x.boxes, y.boxes) for x, y in zip(a, c, strict=True))  # it trained on
     with pytest.raises(ValueError, match="--init takes the architecture"):
@@ -172,7 +172,7 @@ def test_int8_export_keeps_the_outputs(dataset, tmp_path):
     out = tmp_path / "w8.safetensors"
     export_cli.main([str(run), "--out", str(out), "--precision", "int8", "--threshold", "0.3"])
     assert out.stat().st_size < 0.3 * (run / "model.safetensors").stat().st_size
-    assert read_config(out)["detector"]["score_threshold"] == 0.3
+    assert read_config(out)["model"]["score_threshold"] == 0.3
     records = load_records(ann, [2])
     views = [read_record(r, root, True, True) for r in records]
     full, small = PersonDetector.from_checkpoint(run), PersonDetector.from_checkpoint(out)

@@ -142,8 +142,8 @@ def test_cli_checkpoint_gives_identical_predictions(dataset, tmp_path):
     log = train_cli.main(argv)
     assert {"AP", "AP50", "AP75", "loss"} <= set(log[-1])
     saved = json.loads((run / "config.json").read_text())
-    assert saved["detector"]["num_queries"] == 6 and saved["train"]["epochs"] == 1
-    assert (run / "model.safetensors").is_file() and (run / "training_state.pt").is_file()
+    assert saved["model"]["num_queries"] == 6 and saved["train"]["epochs"] == 1
+    assert (run / "model.safetensors").is_file() and (run / "train_state.pt").is_file()
 
     # Resume: a second epoch continues from the saved state.
     log2 = train_cli.main([*argv[:-2], "--epochs", "2", "--out", str(run), "--resume"])

@@ -12,13 +12,14 @@ from posenet.data.mvor import MvorDataset
 from posenet.infer import PoseEstimator
 from posenet.inputs import InputConfig, build_scene, resize_view
 from posenet.model import ModelConfig, PoseNet
+from posenet.scene import Scene, views_of
 
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     root = tmp_path_factory.mktemp("tiny_infer")
     sample = MvorDataset(root, write_dataset(root, {1: 1}, persons=3, seed=1))[0]
-    views = [(v.color, v.depth, v.camera) for v in sample.views]
+    views = views_of(sample)
     boxes = [[b if b is None else b.tolist() for b in sample.person_boxes(p)] for p in range(3)]
     boxes[2][1] = None  # one person unseen in one view
     return views, boxes
@@ -40,8 +41,8 @@ def _estimator(mode: str, precision: str = "fp32", seed: int = 0) -> PoseEstimat
 def test_batched_equals_per_person(scene, mode):
     views, boxes = scene
     est = _estimator(mode)
-    together = est.predict(views, boxes)
-    alone = [est.predict(views, [b]) for b in boxes]
+    together = est.predict(Scene.from_person_boxes(views, boxes))
+    alone = [est.predict(Scene.from_person_boxes(views, [b])) for b in boxes]
     assert together.joints.shape == (3, 10, 3) and together.confidence.shape == (3, 10)
     torch.testing.assert_close(together.joints, torch.cat([a.joints for a in alone]), atol=1e-3, rtol=1e-5)
     torch.testing.assert_close(
@@ -60,16 +61,19 @@ def test_any_image_size_keeps_the_cameras_right(scene, mode):
         up = [cv2.resize(img, (160, 120), interpolation=cv2.INTER_NEAREST) for img in (color, depth)]
         big.append((*up, cam.scale(2.0)))
     big_boxes = [[None if b is None else [(x + 0.5) * 2 - 0.5 for x in b] for b in per] for per in boxes]
-    a, b = est.predict(views, boxes), est.predict(big, big_boxes)
+    a, b = (
+        est.predict(Scene.from_person_boxes(views, boxes)),
+        est.predict(Scene.from_person_boxes(big, big_boxes)),
+    )
     torch.testing.assert_close(a.joints, b.joints, atol=1e-2, rtol=1e-5)
 
 
 def test_heatmaps_for_pictures_and_empty_scene(scene):
     views, boxes = scene
-    pred = _estimator("crop").predict(views, boxes, return_heatmaps=True)
+    pred = _estimator("crop").predict(Scene.from_person_boxes(views, boxes), return_heatmaps=True)
     assert pred.heatmaps.shape == (3, 3, 10, 32 * 32) and pred.valid.shape == (3, 3, 32 * 32)
     assert not pred.valid[2, 1].any()  # no box, no votes
-    empty = _estimator("crop").predict(views, [])
+    empty = _estimator("crop").predict(Scene.from_person_boxes(views, []))
     assert empty.joints.shape == (0, 10, 3)
 
 
@@ -77,9 +81,9 @@ def test_bad_boxes_raise(scene):
     views, _ = scene
     est = _estimator("crop")
     with pytest.raises(ValueError, match="one per view"):
-        est.predict(views, [[None, None]])
+        est.predict(Scene.from_person_boxes(views, [[None, None]]))
     with pytest.raises(ValueError, match="xyxy"):
-        est.predict(views, [[[10, 10, 5, 20], None, None]])
+        est.predict(Scene.from_person_boxes(views, [[[10, 10, 5, 20], None, None]]))
 
 
 def test_checkpoint_round_trip(scene, tmp_path):
@@ -88,7 +92,10 @@ def test_checkpoint_round_trip(scene, tmp_path):
     cfg = {"model": dataclasses.asdict(est.model.config), "preset": "test", "subsample": 1}
     save_checkpoint(tmp_path / "best", est.model, cfg)
     again = PoseEstimator.from_checkpoint(tmp_path / "best", precision="bf16")
-    torch.testing.assert_close(again.predict(views, boxes).joints, est.predict(views, boxes).joints)
+    torch.testing.assert_close(
+        again.predict(Scene.from_person_boxes(views, boxes)).joints,
+        est.predict(Scene.from_person_boxes(views, boxes)).joints,
+    )
     # The loader decides the precision, never the checkpoint (saved here by a bf16 model).
     assert PoseEstimator.from_checkpoint(tmp_path / "best", precision="fp32").precision.name == "fp32"
     model, config = load_checkpoint(tmp_path)  # a run folder: its best/
@@ -109,12 +116,12 @@ def test_missing_default_weights_say_how_to_get_them(tmp_path, monkeypatch):
 def test_flip_averaging_averages_the_mirrored_pass(scene):
     views, boxes = scene
     est = _estimator("crop", seed=4)
-    plain = est.predict(views, boxes)
+    plain = est.predict(Scene.from_person_boxes(views, boxes))
     est.model.config.flip_test = True
-    both = est.predict(views, boxes)
-    box_t, has = PoseEstimator._boxes(boxes, len(views))
+    both = est.predict(Scene.from_person_boxes(views, boxes))
+    s = Scene.from_person_boxes(views, boxes)
     with torch.inference_mode():
-        mirrored = est.model(build_scene(views, box_t, has, est.model.config.inputs, mirror=True))
+        mirrored = est.model(build_scene(s.views, s.boxes, s.has_box, est.model.config.inputs, mirror=True))
     assert not torch.allclose(mirrored.joints, plain.joints)
     torch.testing.assert_close(both.joints, (plain.joints + mirrored.joints) / 2, atol=1e-3, rtol=1e-5)
 
@@ -122,7 +129,7 @@ def test_flip_averaging_averages_the_mirrored_pass(scene):
 @pytest.mark.parametrize("mode", ["crop", "full"])
 def test_a_single_view_works(scene, mode):
     views, boxes = scene
-    pred = _estimator(mode).predict(views[:1], [[b[0]] for b in boxes])
+    pred = _estimator(mode).predict(Scene.from_person_boxes(views[:1], [[b[0]] for b in boxes]))
     assert pred.joints.shape == (3, 10, 3) and torch.isfinite(pred.joints).all()
     # with one view every joint lies on the lifted surface seen by camera 0, in front of it
     assert (pred.joints[..., 2] > 0).all()
@@ -141,12 +148,10 @@ def test_resize_view_keeps_projections_for_any_aspect():
 
 def test_boxed_persons_of_a_frame_without_identified_boxes(tmp_path):
     # A frame whose boxes all have person_id -1 (MVOR's box-only persons) has no one to predict, and no error.
-    from posenet.inputs import persons_of_sample
-
     sample = MvorDataset(tmp_path, write_dataset(tmp_path, {1: 1}, persons=2, seed=2))[0]
     for view in sample.views:
         view.box_person_ids = np.full_like(view.box_person_ids, -1)
-    persons = persons_of_sample(sample, "boxed")
+    persons = Scene.from_sample(sample, "boxed")
     assert persons.person_ids.numel() == 0 and persons.poses.shape == (0, 10, 3)
 
 
@@ -156,5 +161,5 @@ def test_shipped_default_weights_load_and_predict(scene):
         pytest.skip(f"no shipped weights at {DEFAULT_WEIGHTS}")
     est = PoseEstimator.from_checkpoint(None)
     views, boxes = scene
-    out = est.predict(views, boxes)
+    out = est.predict(Scene.from_person_boxes(views, boxes))
     assert out.joints.shape == (3, 10, 3) and np.isfinite(np.asarray(out.joints)).all()

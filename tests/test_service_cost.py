@@ -8,7 +8,8 @@ from conftest import write_tiny_mvor
 from service_harness import tiny_checkpoints
 
 from posenet.data.mvor import MvorDataset
-from service.pipeline import FrameView, PipelineConfig, ScenePipeline
+from posenet.scene import views_of
+from service.pipeline import PipelineConfig, ScenePipeline
 
 CROP = 96 * 96  # the cpu preset's network input
 
@@ -18,7 +19,7 @@ def frame(tmp_path_factory):
     pose, det = tiny_checkpoints(tmp_path_factory.mktemp("ckpt"))
     data = write_tiny_mvor(tmp_path_factory.mktemp("tiny"), days=(1,), frames_per_day=1)
     sample = MvorDataset(data.root, data.gt)[0]
-    views = [FrameView(v.color, v.depth, v.camera) for v in sample.views]  # 3 views
+    views = views_of(sample)  # 3 views
     return pose, det, views
 
 

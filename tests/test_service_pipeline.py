@@ -17,7 +17,8 @@ from posenet.data.mvor import MvorDataset
 from posenet.evaluate import evaluate
 from posenet.infer import PoseEstimator
 from posenet.model import ModelConfig, PoseNet
-from service.pipeline import FrameView, PipelineConfig, ScenePipeline, group_by_ids
+from posenet.scene import SceneView, views_of
+from service.pipeline import PipelineConfig, ScenePipeline, group_by_ids
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +29,11 @@ def setup(tmp_path_factory):
     data = write_tiny_mvor(tmp_path_factory.mktemp("tiny"), days=(1,), frames_per_day=2)
     # The paper's centre matcher: these tests compare its groups (the skeleton matcher, the default, groups by a
     # random network's skeletons here; it has its own tests in tests/test_skeleton_matching.py).
-    return ScenePipeline(pose, config=PipelineConfig(matcher="centres")), data, MvorDataset(data.root, data.gt)
+    return (
+        ScenePipeline(pose, config=PipelineConfig(matcher="centres")),
+        data,
+        MvorDataset(data.root, data.gt),
+    )
 
 
 def test_group_by_ids():
@@ -39,7 +44,7 @@ def test_group_by_ids():
 def test_batched_persons_equal_single_runs_and_matcher_equals_ids(setup):
     pipe, _, ds = setup
     sample = ds[0]
-    views = [FrameView(v.color, v.depth, v.camera) for v in sample.views]
+    views = views_of(sample)
     keep = [v.box_person_ids >= 0 for v in sample.views]
     boxes = [v.boxes[k] for v, k in zip(sample.views, keep, strict=True)]
     ids = [v.box_person_ids[k] for v, k in zip(sample.views, keep, strict=True)]
@@ -68,7 +73,7 @@ def test_run_sample_gives_evaluable_predictions(setup):
 
 def test_no_boxes_and_no_detector(setup):
     pipe, _, ds = setup
-    views = [FrameView(v.color, v.depth, v.camera) for v in ds[0].views]
+    views = views_of(ds[0])
     empty = [np.zeros((0, 4), np.float32)] * 3
     assert pipe.run(views, empty).persons == []
     with pytest.raises(ValueError, match="no detector"):
@@ -79,7 +84,7 @@ def test_crowded_boxes_are_refused_before_matching_explodes(setup):
     pipe, _, _ = setup
     rng = np.random.default_rng(0)
     cams = [Camera.create(500.0, 500.0, 320.0, 240.0) for _ in range(4)]
-    views = [FrameView(None, np.full((480, 640), 3000, np.uint16), c) for c in cams]
+    views = [SceneView(None, np.full((480, 640), 3000, np.uint16), c) for c in cams]
     # The bound holds: it is never below the number of combinations the matcher really enumerates.
     for _ in range(5):
         corners = [np.sort(rng.uniform(0, 600, (int(rng.integers(0, 6)), 2, 2)), axis=1) for _ in cams]
@@ -95,7 +100,7 @@ def test_crowded_boxes_are_refused_before_matching_explodes(setup):
 
 def test_too_many_reference_persons_are_refused(setup):
     pipe, _, ds = setup
-    views = [FrameView(v.color, v.depth, v.camera) for v in ds[0].views]
+    views = views_of(ds[0])
     boxes = [np.tile([[10.0, 10.0, 60.0, 90.0]], (33, 1))] + [np.zeros((0, 4))] * 2
     ids = [np.arange(33), np.zeros(0, np.int64), np.zeros(0, np.int64)]
     with pytest.raises(ValueError, match="33 persons, more than the limit of 32"):

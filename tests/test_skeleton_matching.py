@@ -16,7 +16,8 @@ from posenet.data.mvor import MvorDataset
 from posenet.infer import PoseEstimator
 from posenet.inputs import InputConfig
 from posenet.model import ModelConfig, PoseNet
-from service.pipeline import FrameView, PipelineConfig, ScenePipeline
+from posenet.scene import Scene, views_of
+from service.pipeline import PipelineConfig, ScenePipeline
 
 TEMPLATE = np.array(
     [[0, -700, 0], [0, -550, 0], [180, -500, 0], [-180, -500, 0], [120, 0, 0], [-120, 0, 0],
@@ -37,7 +38,7 @@ def estimator(**model) -> PoseEstimator:
 
 
 def frame(sample):
-    views = [FrameView(v.color, v.depth, v.camera) for v in sample.views]
+    views = views_of(sample)
     boxes = [np.asarray(v.boxes, np.float32).reshape(-1, 4) for v in sample.views]
     return views, boxes
 
@@ -64,13 +65,13 @@ def test_fusion_from_box_heatmaps_equals_predict(tiny, model):
     for n in range(heat.num_boxes):
         v = int(heat.view[n])
         person = [[boxes[v][n - starts[v]] if w == v else None for w in range(3)]]
-        ref = est.predict(views, person)
+        ref = est.predict(Scene.from_person_boxes(views, person))
         np.testing.assert_allclose(alone.joints[n], ref.joints[0], atol=1e-2)
         np.testing.assert_allclose(alone.confidence[n], ref.spread_mm[0], atol=1e-2)
     members = np.array([[starts[0], starts[1], starts[2]], [starts[0] + 1, starts[1] + 1, -1]])
     fused = heat.estimate(members)
     persons = [[boxes[v][m - starts[v]] if m >= 0 else None for v, m in enumerate(row)] for row in members]
-    ref = est.predict(views, persons)
+    ref = est.predict(Scene.from_person_boxes(views, persons))
     np.testing.assert_allclose(fused.joints, ref.joints, atol=1e-2)
     np.testing.assert_allclose(fused.confidence, ref.spread_mm, atol=1e-2)
     # A box lent to two views of the fusion is not the same as one view: the test can fail.
@@ -167,9 +168,8 @@ def test_skeletons_are_the_default_and_centres_give_todays_groups(tiny):
     views, boxes = frame(sample)
     result = pipe.run(views, boxes)
     groups = match_boxes(boxes, [v.depth for v in views], [v.camera for v in views])
-    ref = est.predict(
-        views, [[None if k < 0 else boxes[v][k] for v, k in enumerate(g.indices)] for g in groups]
-    )
+    persons = [[None if k < 0 else boxes[v][k] for v, k in enumerate(g.indices)] for g in groups]
+    ref = est.predict(Scene.from_person_boxes(views, persons))
     assert [p.support for p in result.persons] == [
         [v for v, k in enumerate(g.indices) if k >= 0] for g in groups
     ]
@@ -190,7 +190,7 @@ def test_pipeline_with_the_skeleton_matcher(tiny):
     for person in result.persons:
         if all(b is None or (boxes[v] == b).all(1).any() for v, b in enumerate(person.boxes)):
             single += 1  # one detected box per view (a person merged within a view reports the boxes' hull)
-            alone = est.predict(views, [person.boxes])
+            alone = est.predict(Scene.from_person_boxes(views, [person.boxes]))
             np.testing.assert_allclose(person.joints, alone.joints[0], atol=1e-2)
     assert single > 0
     for matcher in ("centres", "skeletons"):

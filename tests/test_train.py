@@ -10,10 +10,11 @@ from tiny_scenes import write_dataset
 
 from posenet.augment import AugmentConfig
 from posenet.data.mvor import MvorDataset
-from posenet.inputs import InputConfig, build_scene, persons_of_sample
+from posenet.inputs import InputConfig, build_scene
 from posenet.loss import mpjpe
 from posenet.model import ModelConfig, PoseNet
 from posenet.predict import main as predict_main
+from posenet.scene import Scene
 from posenet.train import lr_factor
 from posenet.train import main as train_main
 from posenet.visualize import main as visualize_main
@@ -36,7 +37,7 @@ def test_one_training_step_lowers_the_loss(tiny, mode, aggregation):
     inputs = InputConfig(mode=mode, crop_size=32, image_size=(80, 60), train_crop=(64, 48))
     cfg = ModelConfig(inputs=inputs, base=8, depth=2, aggregation=aggregation, precision="fp32")
     model = PoseNet(cfg)
-    persons = persons_of_sample(sample)
+    persons = Scene.from_sample(sample)
     g = torch.Generator().manual_seed(0)
     scene = build_scene(persons.views, persons.boxes, persons.has_box, inputs, AugmentConfig(), g)
     opt = torch.optim.Adam(model.parameters(), lr=1e-3)
@@ -82,8 +83,9 @@ def test_cli_train_resume_predict(tiny, tmp_path):
     for ckpt in ("last", "best"):
         assert (run / ckpt / "model.safetensors").is_file()
         saved = json.loads((run / ckpt / "config.json").read_text())
-        assert saved["preset"] == "cpu" and saved["model"]["inputs"]["crop_size"] == 32
-        assert saved["data_description"]["train_days"] == [1]
+        assert saved["train"]["preset"] == "cpu" and saved["model"]["inputs"]["crop_size"] == 32
+        assert saved["train"]["data_description"]["train_days"] == [1]
+        assert saved["trained_on"]["days"] == [1] and saved["trained_on"]["data"] == str(root)
     assert train_main([*base, "--resume", "--epochs", "2"]) == 0
     log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
     assert [r["epoch"] for r in log] == [1, 2] and all("val_mpjpe_cm" in r for r in log)
@@ -108,17 +110,19 @@ def test_cli_time_budget_stops_and_resumes(tiny, tmp_path):
     root, _ = tiny
     run = tmp_path / "budget"
     base = ["--data", str(root), "--holdout-day", "2", "--out", str(run)]
-    assert (
-        train_main([*base, *TINY[:-2], "--minutes", "0.02", "--warmup", "0.1", "--decay-start", "0.1"]) == 0
-    )
+    budget = ["--minutes", "0.02", "--warmup", "0.1", "--decay-start", "0.1", "--box-noise", "0.5"]
+    assert train_main([*base, *TINY[:-2], *budget]) == 0
     log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
+    assert json.loads((run / "config.json").read_text())["train"]["augment"]["box_noise"] == 0.5
     assert log[-1]["minutes"] >= 0.02 and "val_mpjpe_cm" in log[-1]  # spent, then validated
     # warm-up then decay from 10 % of the budget on: below the base LR however few steps a loaded machine makes
     assert all(r["steps"] > 0 for r in log) and log[-1]["lr"] < 1e-3
     # resuming with a larger budget continues the clock (and the step count) where it stopped
-    assert train_main([*base, "--resume", "--minutes", "0.04"]) == 0
+    # (the larger budget counts from what the first run spent: one step may outlast 0.02 min on a loaded machine)
+    larger = round(log[-1]["minutes"] + 0.02, 3)
+    assert train_main([*base, "--resume", "--minutes", str(larger)]) == 0
     more = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()][len(log) :]
-    assert more and more[0]["steps"] > log[-1]["steps"] and more[-1]["minutes"] >= 0.04
+    assert more and more[0]["steps"] > log[-1]["steps"] and more[-1]["minutes"] >= larger
 
 
 def test_torchrun_ddp_gloo_two_processes(tiny, tmp_path):
@@ -151,7 +155,7 @@ def test_cli_init_starts_from_given_weights(tiny, tmp_path):
     # a zero-length budget: the run saves the weights it started from, and records where they came from
     assert train_main([*base, "--out", str(second), "--init", str(first / "last"), "--minutes", "0"]) == 0
     saved = json.loads((second / "config.json").read_text())
-    assert saved["init"] == str(first / "last")
+    assert saved["train"]["init"] == str(first / "last") == saved["trained_on"]["init"]
     with pytest.raises(ValueError, match="does not fit"):
         load_init_weights(
             PoseNet(ModelConfig(inputs=InputConfig(crop_size=32), base=16)), str(first / "last")

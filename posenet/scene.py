@@ -1,0 +1,186 @@
+"""The scene contract: V RGB-D views with their cameras, and the persons to estimate as boxes in those views.
+
+Every path to the pose network builds a :class:`Scene`: the dataset readers' samples (:meth:`Scene.from_sample`,
+training, validation, offline prediction), the service's requests and the cross-view matchers (per person, V
+boxes or None: :meth:`Scene.from_person_boxes`). ``posenet.infer.PoseEstimator.predict`` takes it, and
+``posenet.inputs.build_scene`` turns its views and boxes into the network's inputs.
+
+Pixels and boxes follow ``posenet.boxes`` (xyxy, origin at the centre of the top-left pixel); cameras,
+millimetres and frames follow ``posenet.cameras``.
+
+Usage::
+
+    scene = Scene.from_person_boxes(views, [[box_0, None, box_2], ...])   # views: V SceneViews
+    scene = Scene.from_sample(sample, "boxed")                            # a posenet.data.sample.Sample
+    scene.boxes      # (P, V, 4) float32 xyxy (zeros where has_box is False)
+    scene.has_box    # (P, V) bool
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+import torch
+
+from posenet.boxes import person_ids
+from posenet.cameras import Camera
+from posenet.skeleton import NUM_JOINTS
+
+Tensor = torch.Tensor
+
+
+class SceneView(NamedTuple):
+    """One view of a scene (a tuple, so ``color, depth, camera = view`` works).
+
+    color: (H, W, 3) uint8 RGB, or None (a depth-only network, or boxes given without colour); depth: (H, W)
+    uint16 mm along z (0 = unknown); camera: the unbatched :class:`Camera` of these images.
+    """
+
+    color: np.ndarray | None
+    depth: np.ndarray
+    camera: Camera
+
+
+def views_of(sample) -> list[SceneView]:
+    """The V views of a :class:`posenet.data.sample.Sample` as :class:`SceneView`\\ s."""
+    return [SceneView(v.color, v.depth, v.camera) for v in sample.views]
+
+
+def _dense(person_boxes: Sequence[Sequence], V: int, check: bool) -> tuple[np.ndarray, np.ndarray]:
+    """P lists of V entries (an xyxy box or None) as ``(P, V, 4)`` float32 boxes (zeros where none) and a
+    ``(P, V)`` bool mask; ``check`` refuses entries that are not one box per view, finite, with positive size."""
+    P = len(person_boxes)
+    boxes = np.zeros((P, V, 4), np.float32)
+    has = np.zeros((P, V), bool)
+    for p, per_view in enumerate(person_boxes):
+        if check and len(per_view) != V:
+            raise ValueError(f"person {p} has {len(per_view)} box entries, expected one per view ({V})")
+        for v, box in enumerate(per_view):
+            if box is None:
+                continue
+            b = np.asarray(box, np.float32).reshape(-1)
+            if check and (b.shape != (4,) or not np.isfinite(b).all() or b[2] <= b[0] or b[3] <= b[1]):
+                raise ValueError(
+                    f"person {p}, view {v}: box must be finite xyxy with x1 > x0, y1 > y0, got {box}"
+                )
+            boxes[p, v], has[p, v] = b, True
+    return boxes, has
+
+
+@dataclass
+class Scene:
+    """One synchronised multi-view frame and the P persons to estimate in it.
+
+    Attributes:
+        views: V :class:`SceneView`\\ s (tuples ``(color, depth, camera)`` are converted), all of one image size.
+        boxes: (P, V, 4) float32 xyxy pixels of each person in each view (ignored where ``has_box`` is False).
+        has_box: (P, V) bool, whether the person has a box in that view; the network runs only there.
+        person_ids: (P,) int64 identities (the dataset's person ids, the client's, or 0..P-1).
+        poses: (P, J, 3) float32 mm, reference frame: the ground truth, zeros where there is none.
+        valid: (P, J) bool, the annotated joints of ``poses`` (all False without ground truth).
+        id: the frame's id (a sample's multi-view id), or None.
+    """
+
+    views: list[SceneView]
+    boxes: Tensor
+    has_box: Tensor
+    person_ids: Tensor
+    poses: Tensor | None = None
+    valid: Tensor | None = None
+    id: str | None = None
+
+    def __post_init__(self) -> None:
+        if not self.views:
+            raise ValueError("a scene needs at least one view")
+        self.views = [SceneView(*v) for v in self.views]
+        V = len(self.views)
+        self.boxes = torch.as_tensor(self.boxes, dtype=torch.float32)
+        self.has_box = torch.as_tensor(self.has_box, dtype=torch.bool)
+        self.person_ids = torch.as_tensor(self.person_ids, dtype=torch.int64)
+        P = self.boxes.shape[0] if self.boxes.ndim else -1
+        if self.boxes.shape != (P, V, 4) or self.has_box.shape != (P, V) or self.person_ids.shape != (P,):
+            raise ValueError(
+                f"a scene of {V} views needs boxes (P, {V}, 4), has_box (P, {V}) and person_ids (P,), got "
+                f"{tuple(self.boxes.shape)}, {tuple(self.has_box.shape)}, {tuple(self.person_ids.shape)}"
+            )
+        if self.poses is None:
+            self.poses = torch.zeros(P, NUM_JOINTS, 3)
+        self.poses = torch.as_tensor(self.poses, dtype=torch.float32)
+        J = self.poses.shape[1] if self.poses.ndim == 3 else -1
+        if self.valid is None:
+            self.valid = torch.zeros(P, max(J, 0), dtype=torch.bool)
+        self.valid = torch.as_tensor(self.valid, dtype=torch.bool)
+        if self.poses.shape != (P, J, 3) or self.valid.shape != (P, J):
+            raise ValueError(
+                f"a scene of {P} persons needs poses (P, J, 3) and valid (P, J), got {tuple(self.poses.shape)} "
+                f"and {tuple(self.valid.shape)}"
+            )
+
+    @property
+    def num_persons(self) -> int:
+        return self.boxes.shape[0]
+
+    @property
+    def support(self) -> Tensor:
+        """(P,) int64: the number of views in which each person has a box."""
+        return self.has_box.sum(1)
+
+    @classmethod
+    def from_person_boxes(
+        cls,
+        views: Sequence[SceneView],
+        person_boxes: Sequence[Sequence],
+        person_ids: Sequence[int] | None = None,
+        id: str | None = None,
+    ) -> Scene:
+        """The scene of P persons given as P lists of V entries, each an xyxy box (pixels of that view) or None
+        (the service's reference boxes, the matchers' groups). ``person_ids`` default to 0..P-1.
+
+        Raises ValueError naming the person and view of an entry that is not one box per view, finite, with
+        x1 > x0 and y1 > y0.
+        """
+        boxes, has = _dense(person_boxes, len(views), check=True)
+        ids = range(len(boxes)) if person_ids is None else person_ids
+        return cls(
+            list(views), torch.from_numpy(boxes), torch.from_numpy(has), torch.tensor(list(ids)), id=id
+        )
+
+    @classmethod
+    def from_sample(cls, sample, which: str = "annotated") -> Scene:
+        """The persons of a :class:`posenet.data.sample.Sample` with a box in some view, and their truth.
+
+        ``which``: ``"annotated"``, its 3D poses (training, validation); ``"boxed"``, every person of
+        ``posenet.boxes.person_ids`` (prediction), with zeros and False for those without a 3D pose.
+        """
+        if any(v.depth is None for v in sample.views):
+            raise ValueError(
+                f"sample {sample.id}: every view needs a depth image (load the dataset with depth)"
+            )
+        J = sample.poses.shape[1] if sample.poses.ndim == 3 else NUM_JOINTS
+        if which == "annotated":
+            ids = [int(i) for i in sample.person_ids]
+            poses, valid = sample.poses, sample.valid
+        elif which == "boxed":
+            ids = person_ids([v.box_person_ids for v in sample.views])
+            index = {int(pid): k for k, pid in enumerate(sample.person_ids)}
+            # Persons without a 3D pose (or frames with no identified person at all) get zeros and False.
+            poses, valid = np.zeros((len(ids), J, 3), np.float32), np.zeros((len(ids), J), bool)
+            for p, i in enumerate(ids):
+                if i in index:
+                    poses[p], valid[p] = sample.poses[index[i]], sample.valid[index[i]]
+        else:
+            raise ValueError(f"which must be 'annotated' or 'boxed', got {which!r}")
+        boxes, has_box = _dense([sample.person_boxes(pid) for pid in ids], len(sample.views), check=False)
+        keep = has_box.any(1)
+        return cls(
+            views_of(sample),
+            torch.from_numpy(boxes[keep]),
+            torch.from_numpy(has_box[keep]),
+            torch.tensor(ids, dtype=torch.int64)[torch.from_numpy(keep)],
+            torch.from_numpy(np.asarray(poses, np.float32)[keep]),
+            torch.from_numpy(np.asarray(valid, bool)[keep]),
+            sample.id,
+        )
