@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
-import tempfile
 import time
 from pathlib import Path
 
@@ -47,19 +46,17 @@ def pose_rows(args) -> list[dict]:
 
 def detector_rows(args) -> list[dict]:
     """AP50 and AP of one detector on the held-out day of both looks."""
+    from detector.data import load_records
     from detector.evaluate import evaluate_file
     from detector.infer import PersonDetector
-    from detector.predict import load_records, predict_records
+    from detector.predict import predict_records
 
     detector = PersonDetector.from_checkpoint(args.detector)
     scores = {}
     for look, root in (("in", args.data), ("cross", args.cross)):
         annotations = root / "annotations.json"
         results = predict_records(detector, load_records(annotations, [args.holdout_day]), root)
-        with tempfile.NamedTemporaryFile("w", suffix=".json") as f:
-            json.dump(results, f)
-            f.flush()
-            scores[look] = evaluate_file(annotations, f.name, [args.holdout_day])
+        scores[look] = evaluate_file(annotations, results, [args.holdout_day])
     return [
         {"model": f"detector ({args.detector or 'shipped'})", "metric": metric, "in_look": scores["in"][metric],
          "cross_look": scores["cross"][metric], "ratio": scores["cross"][metric] / scores["in"][metric]}

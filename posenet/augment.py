@@ -215,10 +215,9 @@ def detector_like_boxes(
     if config.box_noise <= 0 or P == 0:
         return boxes
     u = lambda *shape: torch.rand(*shape, generator=generator)  # noqa: E731
-    out = boxes.clone()
     noisy = has_box & (u(P, V) < config.box_noise)
     wh = (boxes[..., 2:] - boxes[..., :2]).repeat(1, 1, 2)  # (P, V, 4): w, h, w, h
-    out = out + torch.randn(P, V, 4, generator=generator) * config.box_side_std * wh * noisy[..., None]
+    out = boxes + torch.randn(P, V, 4, generator=generator) * config.box_side_std * wh * noisy[..., None]
     # truncation: one side (x0, y0, x1 or y1) moves inwards by 10-40 % of the box
     cut = noisy & (u(P, V) < config.box_truncate)
     side = torch.randint(0, 4, (P, V), generator=generator)

@@ -619,8 +619,6 @@ def run_config(args: argparse.Namespace, from_dict, resume_keys: tuple[str, ...]
 
 def detector_like(scene, augment: AugmentConfig, generator: torch.Generator) -> torch.Tensor:
     """The scene's (P, V, 4) boxes, made detector-like with ``augment.box_noise`` (``posenet.augment``)."""
-    if augment.box_noise <= 0:
-        return scene.boxes
     sizes = [(v.depth.shape[1], v.depth.shape[0]) for v in scene.views]
     return detector_like_boxes(scene.boxes, scene.has_box, sizes, augment, generator)
 
