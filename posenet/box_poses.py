@@ -115,14 +115,18 @@ class BoxHeatmaps:
         used = members >= 0  # (P, S)
         slot = members.clamp_min(0)  # (P, S)
         cams = self.cameras[self.view[slot]] if self.passes[0].points is None else None  # batch (P, S)
+        if members.shape[1] == 1 and torch.equal(members[:, 0], torch.arange(self.num_boxes)):
+            take = lambda x: x.unsqueeze(1)  # noqa: E731  every box alone, in order: a view, no gather copy
+        else:
+            take = lambda x: x[slot]  # noqa: E731
         outs = []
         with torch.inference_mode():
             for p in self.passes:
-                valid = p.valid[slot] & used.unsqueeze(-1)  # (P, S, M)
+                valid = take(p.valid) & used.unsqueeze(-1)  # (P, S, M)
                 if p.points is not None:  # the 3D aggregation, from the points lifted once per box
-                    outs.append(lifting.aggregate(p.logits[slot], p.points[slot], valid, self.eps))
+                    outs.append(lifting.aggregate(take(p.logits), take(p.points), valid, self.eps))
                 else:
-                    outs.append(self.estimate_fn(p.logits[slot], p.uv[slot], p.depth[slot], valid, cams))
+                    outs.append(self.estimate_fn(take(p.logits), take(p.uv), take(p.depth), valid, cams))
         joints = torch.stack([o.joints for o in outs]).mean(0)
         confidence = torch.stack([o.confidence for o in outs]).mean(0)
         has_points = torch.stack([o.has_points for o in outs]).all(0)

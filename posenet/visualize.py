@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from posenet.infer import PoseEstimator, PosePrediction
-from posenet.lifting import lift
+from posenet.lifting import lift, masked_logits
 from posenet.skeleton import BONES, JOINT_COLOURS, JOINTS, NUM_JOINTS
 
 PERSON_COLOURS = ("tab:orange", "tab:blue", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink")
@@ -34,9 +34,8 @@ def _cloud(pred: PosePrediction, cameras, top: int = 300) -> tuple[np.ndarray, n
     """The ``top`` heaviest points of each person's joint clouds: points (K, 3), joints (K,), weights (K,)."""
     P, V, J, M = pred.heatmaps.shape
     points = lift(cameras, pred.uv.float(), pred.depth.float()).expand(P, V, M, 3).reshape(P, V * M, 3)
-    logits = pred.heatmaps.permute(0, 2, 1, 3).reshape(P, J, V * M)  # (P, J, V*M)
-    valid = pred.valid.expand(P, V, M).reshape(P, 1, V * M)
-    w = torch.softmax(torch.where(valid, logits, torch.full_like(logits, -1e4)), dim=-1)
+    logits = masked_logits(pred.heatmaps, pred.valid.expand(P, V, M))
+    w = torch.softmax(logits.permute(0, 2, 1, 3).reshape(P, J, V * M), dim=-1)  # (P, J, V*M)
     k = min(top, V * M)
     wt, idx = w.topk(k, dim=-1)  # (P, J, k)
     pts = torch.gather(points.unsqueeze(1).expand(P, J, V * M, 3), 2, idx.unsqueeze(-1).expand(P, J, k, 3))
@@ -83,7 +82,7 @@ def draw(sample, pred: PosePrediction, boxes, person_ids, person: int, out: str 
     v = int(np.argmax(areas))
     logits = pred.heatmaps[person, v]  # (J, M)
     valid = pred.valid.expand(pred.heatmaps.shape[0], -1, -1)[person, v]
-    w = torch.softmax(torch.where(valid, logits, torch.full_like(logits, -1e4)), dim=-1)
+    w = torch.softmax(masked_logits(logits[None, None], valid[None, None])[0, 0], dim=-1)
     if mode == "crop":
         side = int(round(w.shape[-1] ** 0.5))
         maps = w.view(NUM_JOINTS, side, side)

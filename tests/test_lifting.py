@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from posenet.cameras import Camera
-from posenet.lifting import EPS_LOGIT, aggregate, centre_of_mass_2d, fuse_2d, lift
+from posenet.lifting import EPS_LOGIT, aggregate, centre_of_mass_2d, fuse_2d, lift, masked_logits
 
 
 def _cameras(V: int, dtype=torch.float64) -> Camera:
@@ -138,3 +138,14 @@ def test_bad_shapes_raise():
             torch.zeros(1, 3, 4, 2, dtype=torch.float64),
             torch.zeros(1, 3, 4, dtype=torch.float64),
         )
+
+
+def test_masked_logits_equals_where_with_its_gradient():
+    g = torch.Generator().manual_seed(3)
+    logits = (torch.randn(3, 2, 10, 50, generator=g) * 20).requires_grad_()
+    valid = torch.rand(3, 2, 50, generator=g) > 0.4
+    out = masked_logits(logits, valid)
+    ref = torch.where(valid.unsqueeze(2), logits, torch.full_like(logits, EPS_LOGIT))
+    assert torch.equal(out, ref)  # bit-identical, not just close
+    (grad,) = torch.autograd.grad((out * torch.arange(50.0)).sum(), logits)
+    assert torch.equal(grad, valid.unsqueeze(2).expand_as(logits) * torch.arange(50.0))

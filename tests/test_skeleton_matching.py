@@ -62,6 +62,9 @@ def test_fusion_from_box_heatmaps_equals_predict(tiny, model):
     # Every box alone, and two groupings across views (one box per view; one view missing).
     alone = heat.single_view()
     assert alone.joints.shape == (heat.num_boxes, 10, 3) and alone.has_points.all()
+    # Not in order: the general (gathering) path of estimate.
+    backwards = heat.estimate(np.arange(heat.num_boxes)[::-1, None].copy())
+    np.testing.assert_allclose(backwards.joints.numpy()[::-1], alone.joints.numpy(), atol=1e-3)
     for n in range(heat.num_boxes):
         v = int(heat.view[n])
         person = [[boxes[v][n - starts[v]] if w == v else None for w in range(3)]]
