@@ -67,6 +67,7 @@ from posenet.checkpoint import (
 from posenet.inputs import build_scene
 from posenet.loss import mpjpe
 from posenet.model import ModelConfig, PoseNet
+from posenet.predict import read_subsample
 from posenet.scene import Scene
 from posenet.schedule import Schedule
 from posenet.train import CachedFrames, run_config, scene_loss, trainable_frames
@@ -84,7 +85,9 @@ class AdaptConfig:
     boxes: str = "annotations"  # "annotations": the file's boxes and ids; "detector": --detector-boxes
     detector_boxes: str | None = None  # with boxes="detector": detector.group's output
     source_data: list[str] = field(default_factory=list)  # labelled rendered datasets (DIR/annotations.json)
-    subsample: int = 2  # reader subsampling: 2 gives the paper's 320x240
+    # Reader subsampling; None: what the network reads (its InputConfig.read_size, as posenet.predict and the
+    # service read), e.g. 2 for 640x480 views and the shipped 320x240 network.
+    subsample: int | None = None
     epochs: int = 5
     minutes: float | None = None  # a budget of adaptation minutes (posenet.schedule); overrides epochs
     clock: str = "wall"
@@ -325,6 +328,8 @@ def adapt(cfg: AdaptConfig) -> dict:
     if cfg.bones > 0 and cfg.bone_stats is None:
         cfg.bone_stats = source_bone_statistics(cfg.source_data)
 
+    if cfg.subsample is None:
+        cfg.subsample = read_subsample(load_target_annotations(cfg), cfg.model.inputs, cfg.days)
     target = target_frames(cfg)
     if not len(target):
         raise ValueError(f"no target frame with a boxed, identified person in days {cfg.days or 'all'}")
@@ -459,7 +464,12 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--detector-boxes", help="with --boxes detector: the json that `python -m detector.group` wrote"
     )
-    g.add_argument("--subsample", type=int, default=d.subsample, help="reader subsampling (2: 320x240)")
+    g.add_argument(
+        "--subsample",
+        type=int,
+        default=d.subsample,
+        help="reader subsampling (default: the network's own read size, e.g. 2 for 640x480 views)",
+    )
     g.add_argument("--max-frames", type=int, help="only the first N target frames (smoke runs)")
     g.add_argument("--no-cache", dest="cache", action="store_false", help="do not keep frames in RAM")
     g = p.add_argument_group("model and source data")

@@ -57,18 +57,26 @@ def predict_samples(estimator: PoseEstimator, samples, scenes_per_batch: int = 4
     return preds
 
 
+def read_subsample(annotations: dict, inputs: InputConfig, days=None) -> int:
+    """The reader's subsampling that brings an annotation file's views to the resolution the model reads
+    (``InputConfig.read_size``, :func:`posenet.inputs.reduction`), as the service decodes a frame sent at full size;
+    1 for a file without frames."""
+    from posenet.data.mvor import MvorDataset  # the reader pulls in image I/O
+
+    meta = MvorDataset(None, annotations, modalities=(), days=days)
+    if len(meta) == 0:
+        return 1
+    W, H = meta[0].views[0].camera.size  # full size (subsample 1)
+    return reduction(W, H, inputs.read_size)
+
+
 def read_dataset(root, annotations, inputs: InputConfig, days=None):
-    """The ``MvorDataset`` of ``root`` read at the resolution the model reads (``InputConfig.read_size``): its
-    views subsampled by :func:`posenet.inputs.reduction`, as the service decodes a frame sent at full size."""
+    """The ``MvorDataset`` of ``root`` read at the resolution the model reads (:func:`read_subsample`)."""
     from posenet.data.mvor import MvorDataset, load_annotations  # the reader pulls in image I/O
 
     if not isinstance(annotations, dict):
         annotations = load_annotations(annotations)
-    meta = MvorDataset(None, annotations, modalities=(), days=days)
-    if len(meta) == 0:
-        return meta
-    W, H = meta[0].views[0].camera.size  # full size (subsample 1)
-    return MvorDataset(root, annotations, subsample=reduction(W, H, inputs.read_size), days=days)
+    return MvorDataset(root, annotations, subsample=read_subsample(annotations, inputs, days), days=days)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -323,3 +323,14 @@ def test_detector_boxes_replace_the_files_boxes(tiny, tmp_path):
     path.write_text(json.dumps([{"image_id": 1, "bbox": [0, 0, 1, 1]}]))
     with pytest.raises(ValueError, match="person_id"):
         load_target_annotations(cfg)
+
+
+def test_reader_subsampling_defaults_to_what_the_network_reads(mvor_annotations):
+    """Without --subsample, posenet.adapt reads views as posenet.predict and the service do: at the network's
+    recorded read size (MVOR's 640x480 views at 320x240: every 2nd pixel), not at a default of its own."""
+    from posenet.predict import read_subsample
+
+    assert read_subsample(mvor_annotations, InputConfig(source_size=(320, 240))) == 2
+    assert read_subsample(mvor_annotations, InputConfig(source_size=(160, 120))) == 4
+    assert read_subsample(mvor_annotations, InputConfig(source_size=None)) == 1  # views as given
+    assert AdaptConfig(data="d", out="o").subsample is None
