@@ -202,11 +202,11 @@ class Frames:
         return out
 
 
-def target_frames(cfg: AdaptConfig) -> Frames:
-    """The target's frames with a boxed, identified person (no 3D poses: ``poses=False``)."""
+def target_frames(cfg: AdaptConfig, gt: dict) -> Frames:
+    """The target's frames with a boxed, identified person (no 3D poses: ``poses=False``); ``gt`` is
+    :func:`load_target_annotations`' answer."""
     from posenet.data.mvor import MvorDataset
 
-    gt = load_target_annotations(cfg)
     dataset = MvorDataset(cfg.data, gt, cfg.subsample, _modalities(cfg), days=cfg.days, poses=False)
     frames = trainable_frames(gt, cfg.subsample, cfg.days, "boxed")  # indices into the days kept
     return Frames(CachedFrames(dataset) if cfg.cache else dataset, frames[: cfg.max_frames or None])
@@ -328,9 +328,10 @@ def adapt(cfg: AdaptConfig) -> dict:
     if cfg.bones > 0 and cfg.bone_stats is None:
         cfg.bone_stats = source_bone_statistics(cfg.source_data)
 
+    gt = load_target_annotations(cfg)  # read once: for the default read size and the frames
     if cfg.subsample is None:
-        cfg.subsample = read_subsample(load_target_annotations(cfg), cfg.model.inputs, cfg.days)
-    target = target_frames(cfg)
+        cfg.subsample = read_subsample(gt, cfg.model.inputs, cfg.days)
+    target = target_frames(cfg, gt)
     if not len(target):
         raise ValueError(f"no target frame with a boxed, identified person in days {cfg.days or 'all'}")
     source = source_frames(cfg) if cfg.source > 0 else Frames([], [])
