@@ -45,6 +45,10 @@ class AugmentConfig:
     brightness: float = 0.25  # factor 1 + U(-b, b)
     contrast: float = 0.25
     saturation: float = 0.25
+    # Colour dropout (issue 12; an extension, paper: none): probability per network image that its colour is
+    # replaced by mid grey, so that the network also learns people from depth alone, the modality that
+    # transfers best to a look it never saw (docs/RESULTS.md, "Look transfer per modality"); 0 disables.
+    color_drop: float = 0.0
     occlude: float = 0.0  # probability per network image of one random occluder (an extension; paper: none)
     # Detector-like boxes (issue 13; an extension, paper: none): probability per (person, view) box of replacing
     # the reference box by one as a detector might give it (see detector_like_boxes); 0 keeps reference boxes.
@@ -255,6 +259,12 @@ def color_jitter(rgb: Tensor, config: AugmentConfig, generator: torch.Generator 
     x = (x - grey.mean((2, 3), keepdim=True)) * factor(config.contrast) + grey.mean((2, 3), keepdim=True)
     x = (x - grey) * factor(config.saturation) + grey
     return x.clamp(0, 1)
+
+
+def color_dropout(rgb: Tensor, probability: float, generator: torch.Generator | None = None) -> Tensor:
+    """``rgb (N, 3, H, W)`` in [0, 1] with each image replaced by mid grey (0.5) with ``probability``."""
+    dropped = torch.rand(rgb.shape[0], generator=generator) < probability  # (N,)
+    return torch.where(dropped.to(rgb.device).view(-1, 1, 1, 1), torch.full_like(rgb, 0.5), rgb)
 
 
 # ----------------------------------------------------------------------------- warps

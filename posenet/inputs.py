@@ -300,6 +300,8 @@ def build_scene(
         rgb = _sample_per_view(color, A, P, size, "bilinear")
         if training and augment.color:
             rgb = aug.color_jitter(rgb, augment, generator)
+        if training and augment.color_drop > 0:
+            rgb = aug.color_dropout(rgb, augment.color_drop, generator)
         channels.append(rgb * 2 - 1)
     if config.modality in ("depth", "rgbd"):
         norm = (d_net - config.depth_centre) / config.depth_range

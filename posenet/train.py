@@ -141,6 +141,8 @@ def resolve_config(args: argparse.Namespace) -> TrainConfig:
         augment["occlude"] = args.occlude
     if args.box_noise is not None:
         augment["box_noise"] = args.box_noise
+    if args.color_drop is not None:
+        augment["color_drop"] = args.color_drop
     top = {f.name for f in dataclasses.fields(TrainConfig)} - {
         "model",
         "augment",
@@ -582,6 +584,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--color", action=argparse.BooleanOptionalAction, help="brightness/contrast/saturation jitter"
     )
     g.add_argument("--occlude", type=float, help="probability of an occluder per crop (extension; 0: off)")
+    g.add_argument(
+        "--color-drop",
+        type=float,
+        help="probability per person-view image of replacing its colour by mid grey, so that the network also "
+        "learns from depth alone (extension for looks it never saw; 0: off)",
+    )
     g.add_argument(
         "--box-noise",
         type=float,

@@ -177,3 +177,38 @@ def test_detector_like_boxes_stay_valid_and_leave_the_rest_alone():
                     for q in others
                 )
     assert merged > 0
+
+
+def test_color_dropout_greys_whole_images_and_leaves_the_rest():
+    rgb = torch.rand(64, 3, 8, 8, generator=torch.Generator().manual_seed(0))
+    assert torch.equal(aug.color_dropout(rgb, 0.0, torch.Generator().manual_seed(1)), rgb)
+    assert torch.equal(
+        aug.color_dropout(rgb, 1.0, torch.Generator().manual_seed(1)), torch.full_like(rgb, 0.5)
+    )
+    out = aug.color_dropout(rgb, 0.5, torch.Generator().manual_seed(1))
+    assert torch.equal(out, aug.color_dropout(rgb, 0.5, torch.Generator().manual_seed(1)))  # seeded
+    grey = (out == 0.5).flatten(1).all(1)
+    kept = (out == rgb).flatten(1).all(1)
+    assert torch.equal(grey, ~kept) and 16 < int(grey.sum()) < 48  # whole images, about half of them
+
+
+def test_color_drop_in_build_scene_greys_colour_only():
+    H, W = 60, 80
+    rng = np.random.default_rng(0)
+    color = rng.integers(0, 255, (H, W, 3), dtype=np.uint8)
+    depth = rng.integers(1500, 4000, (H, W), dtype=np.uint16)
+    views = [(color, depth, Camera.create(50, 50, 40, 30))] * 2
+    boxes = torch.tensor([[[2.0, 10, 40, 50], [20, 5, 60, 55]]])
+    cfg = InputConfig(mode="crop", crop_size=32)
+
+    def scene(drop: float):
+        augment = aug.AugmentConfig(color_drop=drop)
+        return build_scene(
+            views, boxes, torch.ones(1, 2, dtype=torch.bool), cfg, augment, torch.Generator().manual_seed(3)
+        )
+
+    kept, dropped = scene(0.0), scene(1.0)
+    assert torch.equal(dropped.images[:, :3], torch.zeros_like(dropped.images[:, :3]))  # mid grey, normalised
+    assert not torch.equal(kept.images[:, :3], dropped.images[:, :3])
+    assert torch.equal(kept.images[:, 3:], dropped.images[:, 3:])  # depth channels and box mask untouched
+    assert torch.equal(kept.A, dropped.A) and torch.equal(kept.valid, dropped.valid)

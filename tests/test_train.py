@@ -110,10 +110,12 @@ def test_cli_time_budget_stops_and_resumes(tiny, tmp_path):
     root, _ = tiny
     run = tmp_path / "budget"
     base = ["--data", str(root), "--holdout-day", "2", "--out", str(run)]
-    budget = ["--minutes", "0.02", "--warmup", "0.1", "--decay-start", "0.1", "--box-noise", "0.5"]
+    budget = ["--minutes", "0.02", "--warmup", "0.1", "--decay-start", "0.1", "--box-noise", "0.5",
+              "--color-drop", "0.3"]  # fmt: skip
     assert train_main([*base, *TINY[:-2], *budget]) == 0
     log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
-    assert json.loads((run / "config.json").read_text())["train"]["augment"]["box_noise"] == 0.5
+    augment = json.loads((run / "config.json").read_text())["train"]["augment"]
+    assert augment["box_noise"] == 0.5 and augment["color_drop"] == 0.3
     assert log[-1]["minutes"] >= 0.02 and "val_mpjpe_cm" in log[-1]  # spent, then validated
     # warm-up then decay from 10 % of the budget on: below the base LR however few steps a loaded machine makes
     assert all(r["steps"] > 0 for r in log) and log[-1]["lr"] < 1e-3
