@@ -95,34 +95,39 @@ def pick_frames(ds: MvorDataset, root: Path) -> dict[int, int]:
     return found
 
 
+def _reencoded(files: list, prefix: str, reencode) -> list:
+    """The request's parts whose name starts with ``prefix`` passed through ``reencode((filename, data, mime))``,
+    once, before timing; the other parts as they are."""
+    return [(name, reencode(part) if name.startswith(prefix) else part) for name, part in files]
+
+
 def as_jpeg(files: list, quality: int = 95) -> list:
-    """The request's colour parts re-encoded as JPEG (as a camera would stream them), once, before timing."""
+    """The request's colour parts re-encoded as JPEG (as a camera would stream them)."""
     import cv2
 
-    out = []
-    for name, (filename, data, mime) in files:
-        if name.startswith("color_"):
-            bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
-            data = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])[1].tobytes()
-            filename, mime = Path(filename).with_suffix(".jpg").name, "image/jpeg"
-        out.append((name, (filename, data, mime)))
-    return out
+    def jpeg(part: tuple) -> tuple:
+        filename, data, _ = part
+        bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        data = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])[1].tobytes()
+        return Path(filename).with_suffix(".jpg").name, data, "image/jpeg"
+
+    return _reencoded(files, "color_", jpeg)
 
 
 def as_fast_depth(files: list) -> list:
-    """The request's depth parts re-written losslessly as PNG with filter NONE and zlib level 1, once, before
-    timing: the same millimetres in a file that is smaller than the renderer's (SUB filter, RLE) and inflates
-    in about 60 % of the time (docs/service.md, "Sending frames fast")."""
+    """The request's depth parts re-written losslessly as PNG with filter NONE and zlib level 1: the same
+    millimetres in a file smaller than the renderer's (SUB filter, RLE) that inflates in about 60 % of the time
+    (measured 2.1 against 3.3 ms per 640x480 view, session 8)."""
     import cv2
 
-    out = []
-    for name, (filename, data, mime) in files:
-        if name.startswith("depth_"):
-            depth = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-            params = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
-            data = cv2.imencode(".png", depth, params)[1].tobytes()
-        out.append((name, (filename, data, mime)))
-    return out
+    params = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+
+    def fast(part: tuple) -> tuple:
+        filename, data, mime = part
+        depth = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        return filename, cv2.imencode(".png", depth, params)[1].tobytes(), mime
+
+    return _reencoded(files, "depth_", fast)
 
 
 def post(client: httpx.Client, scene: dict, files: list) -> tuple[float, dict]:

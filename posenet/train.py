@@ -132,17 +132,11 @@ def resolve_config(args: argparse.Namespace) -> TrainConfig:
     if args.loss is not None:
         model["aggregation"] = args.loss
     augment = preset.pop("augment")
-    for key in ("flip", "crop", "color"):
+    for key in ("flip", "crop", "color", "occlude", "box_noise", "color_drop"):
         if getattr(args, key) is not None:
             augment[key] = getattr(args, key)
     if args.rotate is not None:
         augment["rotate_deg"] = args.rotate
-    if args.occlude is not None:
-        augment["occlude"] = args.occlude
-    if args.box_noise is not None:
-        augment["box_noise"] = args.box_noise
-    if args.color_drop is not None:
-        augment["color_drop"] = args.color_drop
     top = {f.name for f in dataclasses.fields(TrainConfig)} - {
         "model",
         "augment",
