@@ -31,6 +31,7 @@ RUNTIMES = {  # name: (backend, precision)
     "torch": ("torch", "auto"),
     "onnxruntime": ("onnxruntime", "fp32"),
     "openvino": ("openvino", "auto"),
+    "openvino-fp32": ("openvino", "fp32"),
 }
 
 

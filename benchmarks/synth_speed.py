@@ -20,15 +20,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from posenet.data.images import COLOR_PNG_PARAMS, DEPTH_PNG_PARAMS
 from posenet.data.synth.looks import LOOKS, make_look
 from posenet.data.synth.procedural import procedural_frame
 from posenet.data.synth.raster import rasterize
 from posenet.data.synth.rig import random_rig
 from posenet.data.synth.scene import frame_primitives, render_frame
 from posenet.data.synth.twin import load_twin, twin_frame
-
-PNG = [cv2.IMWRITE_PNG_COMPRESSION, 1, cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE,
-       cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_SUB]  # fmt: skip
 
 
 class Clock:
@@ -62,7 +60,10 @@ def run(builder, rig, n: int, seed: int) -> dict:
         for r in renders:
             clock.time(
                 "png encode",
-                lambda r=r: (cv2.imencode(".png", r.color, PNG), cv2.imencode(".png", r.depth, PNG)),
+                lambda r=r: (
+                    cv2.imencode(".png", r.color, COLOR_PNG_PARAMS),
+                    cv2.imencode(".png", r.depth, DEPTH_PNG_PARAMS),
+                ),
             )
         views += len(renders)
     total_wall = sum(v for k, v in clock.wall.items() if k != "raster only")

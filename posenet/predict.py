@@ -60,10 +60,12 @@ def predict_samples(estimator: PoseEstimator, samples, scenes_per_batch: int = 4
 def read_subsample(annotations: dict, inputs: InputConfig, days=None) -> int:
     """The reader's subsampling that brings an annotation file's views to the resolution the model reads
     (``InputConfig.read_size``, :func:`posenet.inputs.reduction`), as the service decodes a frame sent at full size;
-    1 for a file without frames."""
+    1 for a file without frames. Only the cameras are read: a file without ``annotations3D`` works."""
     from posenet.data.mvor import MvorDataset  # the reader pulls in image I/O
 
-    meta = MvorDataset(None, annotations, modalities=(), days=days)
+    if "annotations3D" in annotations:
+        annotations = {k: v for k, v in annotations.items() if k != "annotations3D"}
+    meta = MvorDataset(None, annotations, modalities=(), days=days, poses=False)
     if len(meta) == 0:
         return 1
     W, H = meta[0].views[0].camera.size  # full size (subsample 1)

@@ -93,6 +93,22 @@ def test_a_file_without_3d_poses_adapts_and_gives_the_same_weights(tiny, tmp_pat
     assert _weights(tmp_path / "no3d") != (tiny["init"] / "model.safetensors").read_bytes()  # it did learn
 
 
+def test_the_default_read_size_needs_no_3d_poses(tiny, tmp_path):
+    """Without --subsample the read size comes from the file's cameras alone; it used to need annotations3D."""
+    from posenet.predict import read_subsample
+
+    args = _args(tiny, tmp_path / "run", "no3d", "--epochs", "1")
+    del args[args.index("--subsample") : args.index("--subsample") + 2]
+    assert adapt_main(args) == 0
+    saved = json.loads((tmp_path / "run" / "config.json").read_text())
+    expected = read_subsample(load_annotations(tiny["with3d"]), TINY_MODEL.inputs)
+    assert (
+        saved["train"]["subsample"]
+        == expected
+        == read_subsample(load_annotations(tiny["no3d"], poses=False), TINY_MODEL.inputs)
+    )
+
+
 # ----------------------------------------------------------------------------- the losses
 def test_per_view_estimates_mix_into_the_fused_one():
     """The fused joint is the views' own estimates weighted by each view's share of the softmax mass."""

@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from posenet.data.images import COLOR_PNG_PARAMS, DEPTH_PNG_PARAMS
 from posenet.data.synth.looks import LOOKS, Look, make_look
 from posenet.data.synth.procedural import procedural_frame
 from posenet.data.synth.rig import Rig, random_rig
@@ -70,7 +71,6 @@ class SynthConfig:
     limit: int | None = None  # twin: render only the first N MVOR frames (tests, benchmarks)
     stride: int = 1  # twin: render every stride-th MVOR frame (quick fidelity checks)
     mvor_days: list[int] | None = None  # twin: render only these MVOR days (None: all four)
-    png_compression: int = 1  # cv2 PNG level: 1 is fast, the files barely shrink at higher levels
     look: str = "twin"  # "twin" (the look before looks existed), "random" (to train on) or "alt" (to test on)
     frames: int = 60  # sequence: frames per sequence
     fps: float = 15.0  # sequence: frame rate (the frames' timestamp_s)
@@ -251,15 +251,6 @@ def render_job(job: Job) -> JobResult:
     views = render_frame(frame, rig, rng)
     out = Path(cfg.out)
     world_to_ref = np.linalg.inv(rigs.ref_to_world[job.day])
-    # RLE deflate after the SUB filter: as small as OpenCV's default on noisy sensor images, twice as fast.
-    png_params = [
-        cv2.IMWRITE_PNG_COMPRESSION,
-        cfg.png_compression,
-        cv2.IMWRITE_PNG_STRATEGY,
-        cv2.IMWRITE_PNG_STRATEGY_RLE,
-        cv2.IMWRITE_PNG_FILTER,
-        cv2.IMWRITE_PNG_FILTER_SUB,
-    ]
     images, boxes = [], []
     support = np.zeros(len(frame.persons), int)
     seen = np.zeros((len(frame.persons), NUM_MVOR_POINTS), bool)
@@ -267,10 +258,13 @@ def render_job(job: Job) -> JobResult:
         cam = rigs.cam_numbers[job.day][k]
         name = f"day{job.day}/cam{cam}/color/{job.frame:06d}.png"
         iid = image_id(job.day, cam, job.frame)
-        for sub, img in (("color", vr.color[..., ::-1]), ("depth", vr.depth)):
+        for sub, img, params in (
+            ("color", vr.color[..., ::-1], COLOR_PNG_PARAMS),
+            ("depth", vr.depth, DEPTH_PNG_PARAMS),
+        ):
             path = out / name.replace("/color/", f"/{sub}/")
             path.parent.mkdir(parents=True, exist_ok=True)
-            if not cv2.imwrite(str(path), img, png_params):
+            if not cv2.imwrite(str(path), img, params):
                 raise OSError(f"could not write {path}")
         images.append(
             {
