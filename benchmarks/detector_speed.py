@@ -6,7 +6,9 @@ Random weights (speed does not depend on them), 640x480 RGB(-D) views resized by
 preprocessing, ``PersonDetector.detect`` end to end (preprocessing, DETR, decoding). Prints the machine, then one
 JSON line per variant and runtime: the presets ``cpu`` and ``paper`` and the variants in ``VARIANTS`` (a preset
 with overrides), each on ``--runtimes``: ``torch-nchw`` (torch's default layout, as before issue 11),
-``torch-fp32`` and ``torch`` (channels_last; precision fp32 / auto), ``onnxruntime``, ``openvino``.
+``torch-fp32`` and ``torch`` (channels_last; precision fp32 / auto), ``onnxruntime``, ``openvino`` (precision
+auto) and ``openvino-fp32``. ``ONEDNN_MAX_CPU_ISA=AVX2`` caps OpenVINO's convolutions as it caps torch's (with
+``ATEN_CPU_CAPABILITY=avx2``): the way to time an AVX2-only CPU on a newer one.
 
     python benchmarks/detector_speed.py --presets cpu --runtimes torch-nchw torch-fp32 torch onnxruntime openvino
 """
