@@ -187,16 +187,32 @@ def combination_bound(dist: np.ndarray, view: np.ndarray, num_views: int, thresh
     return float(np.prod(np.where(later, 1 + per_view, 1), axis=1).sum())
 
 
-def choose_greedily(combos: list[tuple[np.ndarray, np.ndarray]], n: int) -> list[tuple[np.ndarray, float]]:
+def choose_greedily(
+    combos: list[tuple[np.ndarray, np.ndarray]], n: int, member_bonus: float | None = None
+) -> list[tuple[np.ndarray, float]]:
     """The paper's rule: combinations with more members first, then the closest first, each item used once;
-    the items left over become single-item groups (in their order). Returns ``(members, mean_distance)``."""
+    the items left over become single-item groups (in their order). Returns ``(members, mean_distance)``.
+
+    ``member_bonus`` (same unit as the distances) replaces "more members first" by one order over every
+    combination: mean distance minus ``member_bonus`` per member beyond the first, lowest first, so that a close
+    pair can win over a loose triple that would take a neighbour's item. None: the paper's rule (an infinite
+    bonus). The order within a size is the same in both."""
     used = np.zeros(n, bool)
     chosen: list[tuple[np.ndarray, float]] = []
-    for members, mean in reversed(combos):  # larger combinations first
-        for i in np.argsort(mean, kind="stable"):  # then the closest first
-            if not used[members[i]].any():
-                used[members[i]] = True
-                chosen.append((members[i], float(mean[i])))
+    if member_bonus is None:
+        order = [(members, mean, np.argsort(mean, kind="stable")) for members, mean in reversed(combos)]
+    else:  # one list: (members, mean) of every size, ordered by the key
+        rows = [
+            (m, float(d)) for members, mean in reversed(combos) for m, d in zip(members, mean, strict=True)
+        ]
+        keys = np.array([d - member_bonus * (len(m) - 1) for m, d in rows])
+        order = [(rows, None, np.argsort(keys, kind="stable"))] if rows else []
+    for members, mean, ranks in order:  # larger combinations first (paper), or all by the key
+        for i in ranks:  # then the closest first
+            m, d = (members[i], float(mean[i])) if mean is not None else members[i]
+            if not used[m].any():
+                used[m] = True
+                chosen.append((m, d))
     return chosen + [(np.array([b]), 0.0) for b in np.flatnonzero(~used)]
 
 

@@ -59,6 +59,9 @@ class SkeletonMatchConfig:
     # Two boxes of one view whose skeletons agree this well read the same person (a duplicate gives the same
     # skeleton to a few cm); two distinct people are never this close at most joints.
     same_view_mm: float = 250.0
+    # None: the paper's greedy order (more views first, then closer). A number (mm): every combination in one
+    # order, its mean skeleton distance minus this per view beyond the first (``choose_greedily``).
+    member_bonus_mm: float | None = None
 
 
 def skeleton_distances(joints: np.ndarray, ok: np.ndarray) -> np.ndarray:
@@ -135,7 +138,8 @@ def group_skeletons(
                 f"skeletons within {config.threshold_mm:g} mm, more than {max_combinations:g}); give "
                 "person_ids with the boxes, or fewer boxes"
             )
-    chosen = choose_greedily(combinations_within(unit_dist, unit_view, config.threshold_mm), U)
+    combos = combinations_within(unit_dist, unit_view, config.threshold_mm)
+    chosen = choose_greedily(combos, U, config.member_bonus_mm)
     members = [np.flatnonzero(np.isin(unit, units)) for units, _ in chosen]
     return [(m, mean) for m, (_, mean) in zip(members, chosen, strict=True)]
 

@@ -263,3 +263,23 @@ def test_served_detector_mode_with_the_skeleton_matcher(tmp_path, tiny):
         bad = {"ORPOSE_MATCHER": "nearest"}
     with pytest.raises(RuntimeError, match="matcher"), Server({**env, **bad}, startup_s=60):
         pass
+
+
+def test_a_member_bonus_lets_a_close_pair_win_over_a_loose_triple():
+    """Items 0 (view 0), 1 (view 1), 2 (view 2): 0-1 are 100 apart, 2 is 500 from both. The paper's order takes
+    the triple; a bonus of 200 per extra member ranks the pair (100 - 200) before the triple (367 - 400),
+    and a bonus of 300 keeps the triple first (367 - 600 < 100 - 300). None is the paper's rule."""
+    from detector.matching import choose_greedily, combinations_within
+
+    dist = np.array([[0, 100, 500], [100, 0, 500], [500, 500, 0]], float)
+    view = np.array([0, 1, 2])
+    combos = combinations_within(dist, view, 600.0)
+
+    def groups(bonus):
+        return [sorted(m.tolist()) for m, _ in choose_greedily(combos, 3, bonus)]
+
+    assert groups(None) == [[0, 1, 2]]
+    assert groups(300.0) == [[0, 1, 2]]
+    assert groups(200.0) == [[0, 1], [2]]
+    chosen = choose_greedily(combos, 3, 200.0)
+    assert chosen[0][1] == pytest.approx(100.0)  # the real mean distance, not the ranking key
