@@ -110,8 +110,8 @@ def group_skeletons(
 
     Returns:
         Per person ``(members, mean_distance)``: the box numbers (sorted), and the mean distance between its
-        views' units (0 for one view). Multi-view persons first (more views, then closer, first), then the rest
-        in box order.
+        views' units (0 for one view). Multi-view persons first (more views, then closer, first; with
+        ``member_bonus_mm``, in the order of its key), then the rest in box order.
     """
     config = config or SkeletonMatchConfig()
     view = np.asarray(view, np.int64)
