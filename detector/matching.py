@@ -199,20 +199,21 @@ def choose_greedily(
     bonus). The order within a size is the same in both."""
     used = np.zeros(n, bool)
     chosen: list[tuple[np.ndarray, float]] = []
-    if member_bonus is None:
-        order = [(members, mean, np.argsort(mean, kind="stable")) for members, mean in reversed(combos)]
-    else:  # one list: (members, mean) of every size, ordered by the key
-        rows = [
-            (m, float(d)) for members, mean in reversed(combos) for m, d in zip(members, mean, strict=True)
-        ]
-        keys = np.array([d - member_bonus * (len(m) - 1) for m, d in rows])
-        order = [(rows, None, np.argsort(keys, kind="stable"))] if rows else []
-    for members, mean, ranks in order:  # larger combinations first (paper), or all by the key
-        for i in ranks:  # then the closest first
-            m, d = (members[i], float(mean[i])) if mean is not None else members[i]
-            if not used[m].any():
-                used[m] = True
-                chosen.append((m, d))
+    blocks = list(reversed(combos))  # one (members, mean) block per size, larger first
+    if blocks:
+        means = np.concatenate([mean for _, mean in blocks])
+        block = np.concatenate([np.full(len(mean), b) for b, (_, mean) in enumerate(blocks)])
+        row = np.concatenate([np.arange(len(mean)) for _, mean in blocks])
+        if member_bonus is None:  # larger combinations first, then the closest first (lexsort is stable)
+            ranks = np.lexsort((means, block))
+        else:
+            size = np.array([members.shape[1] for members, _ in blocks])[block]
+            ranks = np.argsort(means - member_bonus * (size - 1), kind="stable")
+        for i in ranks:
+            members = blocks[block[i]][0][row[i]]
+            if not used[members].any():
+                used[members] = True
+                chosen.append((members, float(means[i])))
     return chosen + [(np.array([b]), 0.0) for b in np.flatnonzero(~used)]
 
 
