@@ -34,6 +34,7 @@ VARIANTS = {  # name: (backend, precision)
     "onnxruntime-fp32": ("onnxruntime", "fp32"),
     "openvino-fp32": ("openvino", "fp32"),
     "openvino-auto": ("openvino", "auto"),
+    "openvino-int8": ("openvino", "int8"),
 }
 
 

@@ -52,6 +52,7 @@ VARIANTS = {  # name: the server's environment
     "torch": {"ORPOSE_BACKEND": "torch", "ORPOSE_PRECISION": "auto"},
     "onnxruntime": {"ORPOSE_BACKEND": "onnxruntime", "ORPOSE_PRECISION": "auto"},
     "openvino": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "auto"},
+    "openvino-int8": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "int8"},
 }
 
 

@@ -103,7 +103,8 @@ class PersonDetector:
     """A trained DETR with its preprocessing; see the module docstring.
 
     Args:
-        precision: ``auto`` (bf16 only where this machine computes it natively), ``fp32`` or ``bf16``.
+        precision: ``auto`` (bf16 only where this machine computes it natively), ``fp32``, ``bf16``, or ``int8``
+            (OpenVINO only: ``posenet.quantize``).
         backend: ``torch`` (default), ``onnxruntime``, ``openvino`` or ``auto`` (``posenet.runtime``).
         threads: the runtime's intra-op threads (default: torch's).
     """
@@ -126,13 +127,33 @@ class PersonDetector:
 
     @property
     def precision(self) -> Precision:
-        return self.runner.precision if self.runner is not None else self._precision
+        return self.runner.precision if self.runner is not None else self._precision.on_torch()
 
     def use_backend(self, backend: str = "auto", threads: int | None = None) -> Backend:
         """Run the network on ``backend`` from now on; a failing export or runtime falls back to torch."""
         self._graph_shape = tuple(self._example()[0].shape[1:])  # (C, H, W) of the exported graph's input
-        self.runner, self.backend = load_runner(backend, self.device, self.export, threads, self._precision)
+        self.runner, self.backend = load_runner(
+            backend,
+            self.device,
+            self.export,
+            threads,
+            self._precision,
+            self._calibration_inputs,
+            transformer=True,
+        )
         return self.backend
+
+    def _calibration_inputs(self, runner) -> list[dict]:
+        """The network's inputs on the int8 calibration scenes (``posenet.quantize``), run by ``runner``."""
+        from posenet.quantize import Recorder, calibration_samples
+
+        recorder = self.runner = Recorder(runner)
+        try:
+            for sample in calibration_samples():
+                self.detect([v.color for v in sample.views], [v.depth for v in sample.views])
+        finally:
+            self.runner = None
+        return recorder.inputs
 
     def _example(self) -> tuple[torch.Tensor, torch.Tensor]:
         """Inputs of two blank 4:3 views (MVOR's aspect): the shape that the exported graph takes."""

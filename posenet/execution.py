@@ -7,6 +7,9 @@ precision is resolved where the model runs, at load time:
 - ``auto`` (the default): bf16 on a CUDA GPU that supports it, and on a CPU that computes bf16 natively
   (AVX512-BF16 or AMX, with torch's kernels allowed to use it); float32 everywhere else.
 - ``fp32`` / ``bf16`` force a choice (``--precision`` on the command lines, ``ORPOSE_PRECISION`` for the service).
+- ``int8`` (inference only): both networks quantized for OpenVINO (``posenet.quantize``), the fastest choice on a
+  CPU without native bf16; torch and ONNX Runtime then compute float32. ``auto`` never picks it: it trades a little
+  accuracy for speed, so a user asks for it.
 
 ``machine()`` describes the machine in the terms a speed figure needs (CPU model, cores, torch's CPU capability,
 native bf16, library versions), so that every benchmark can record it beside its numbers.
@@ -29,14 +32,15 @@ from pathlib import Path
 
 import torch
 
-PRECISIONS = ("auto", "fp32", "bf16")
+PRECISIONS = ("auto", "fp32", "bf16")  # what torch computes at (training, and inference on torch)
+RUN_PRECISIONS = (*PRECISIONS, "int8")  # what inference may ask for: int8 runs on OpenVINO
 # CPU flags (as /proc/cpuinfo spells them) that make bf16 arithmetic native rather than emulated.
 NATIVE_BF16_FLAGS = frozenset({"amx_bf16", "avx512_bf16"})
 
 
 @dataclass(frozen=True)
 class Precision:
-    """A resolved precision: ``name`` is ``fp32`` or ``bf16``; ``reason`` says why, in one sentence."""
+    """A resolved precision: ``name`` is ``fp32``, ``bf16`` or ``int8``; ``reason`` says why, in one sentence."""
 
     name: str
     reason: str
@@ -44,6 +48,18 @@ class Precision:
     @property
     def bf16(self) -> bool:
         return self.name == "bf16"
+
+    @property
+    def int8(self) -> bool:
+        return self.name == "int8"
+
+    def on_torch(self) -> Precision:
+        """What torch computes when asked for this precision: int8 graphs are OpenVINO's, torch runs float32."""
+        if self.int8:
+            return Precision(
+                "fp32", "int8 was asked for, but it runs on OpenVINO only: torch computes float32"
+            )
+        return self
 
 
 @functools.cache
@@ -101,10 +117,12 @@ def native_bf16(device: str | torch.device = "cpu") -> tuple[bool, str]:
 
 
 def resolve_precision(requested: str | None = "auto", device: str | torch.device = "cpu") -> Precision:
-    """The precision to run at on ``device``: ``requested`` (``auto``, ``fp32`` or ``bf16``; None = ``auto``)."""
+    """The precision to run at on ``device``: ``requested`` (one of ``RUN_PRECISIONS``; None = ``auto``)."""
     requested = requested or "auto"
-    if requested not in PRECISIONS:
-        raise ValueError(f"precision must be one of {PRECISIONS}, got {requested!r}")
+    if requested not in RUN_PRECISIONS:
+        raise ValueError(f"precision must be one of {RUN_PRECISIONS}, got {requested!r}")
+    if requested == "int8":
+        return Precision("int8", "int8 was asked for: OpenVINO runs quantized graphs (posenet.quantize)")
     if requested != "auto":
         return Precision(requested, f"{requested} was asked for")
     ok, why = native_bf16(device)

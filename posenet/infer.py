@@ -89,9 +89,22 @@ class PoseEstimator:
 
         A failing export or runtime falls back to torch; ``self.backend.reason`` then says why."""
         self.model.runner, self.backend = load_runner(
-            backend, self.device, self.export, threads, self.model.precision()
+            backend, self.device, self.export, threads, self.model.precision(), self._calibration_inputs
         )
         return self.backend
+
+    def _calibration_inputs(self, runner) -> list[dict]:
+        """The U-Net's inputs on the int8 calibration scenes (``posenet.quantize``), run by ``runner``."""
+        from posenet.quantize import Recorder, calibration_samples
+
+        recorder, self.model.runner = Recorder(runner), None
+        try:
+            self.model.runner = recorder
+            for sample in calibration_samples():
+                self.predict(Scene.from_sample(sample, "boxed"))
+        finally:
+            self.model.runner = None
+        return recorder.inputs
 
     def export(self, folder: Path | None = None) -> Path:
         """The U-Net as an ONNX graph (cached by a hash of its weights; see ``posenet.runtime``)."""
@@ -106,7 +119,11 @@ class PoseEstimator:
     @property
     def precision(self):
         """The precision the U-Net runs at here (the runtime's, when one runs it)."""
-        return self.model.runner.precision if self.model.runner is not None else self.model.precision()
+        return (
+            self.model.runner.precision
+            if self.model.runner is not None
+            else self.model.precision().on_torch()
+        )
 
     def predict(self, scenes: Scene | Sequence[Scene], return_heatmaps: bool = False):
         """3D poses of the persons of one scene, or of several scenes in one U-Net pass.

@@ -18,7 +18,7 @@ from torch import nn
 
 from posenet import augment as aug
 from posenet import lifting
-from posenet.execution import PRECISIONS, Precision, resolve_precision
+from posenet.execution import RUN_PRECISIONS, Precision, resolve_precision
 from posenet.inputs import InputConfig, SceneInput
 from posenet.unet import UNet, UNetConfig
 
@@ -48,8 +48,8 @@ class ModelConfig:
     def __post_init__(self) -> None:
         if isinstance(self.inputs, dict):
             self.inputs = InputConfig(**self.inputs)
-        if self.precision not in PRECISIONS:
-            raise ValueError(f"precision must be one of {PRECISIONS}, got {self.precision!r}")
+        if self.precision not in RUN_PRECISIONS:
+            raise ValueError(f"precision must be one of {RUN_PRECISIONS}, got {self.precision!r}")
         if self.aggregation not in ("3d", "2d"):
             raise ValueError(f"aggregation must be '3d' or '2d', got {self.aggregation!r}")
         stride = 2**self.depth

@@ -9,7 +9,8 @@ Backends (``ORPOSE_BACKEND`` for the service, ``--backend`` on the command lines
 
 - ``torch``: eager torch, channels_last, bf16 autocast where :mod:`posenet.execution` chooses bf16;
 - ``onnxruntime``: ONNX Runtime's CPU provider, float32;
-- ``openvino``: OpenVINO's CPU plugin, float32, or bf16 where the CPU computes bf16 natively;
+- ``openvino``: OpenVINO's CPU plugin, float32, or bf16 where the CPU computes bf16 natively, or int8 when asked
+  for (``posenet.quantize``: quantized graphs, cached beside the float32 ones);
 - ``auto`` (default): ``openvino`` if it is installed, else ``onnxruntime``, else ``torch``; torch on a GPU.
 
 The ONNX files are **built at first use** from the weights being loaded and cached under
@@ -22,6 +23,7 @@ If an export or a runtime fails, the model runs on torch and the reason is logge
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import json
@@ -84,14 +86,33 @@ def load_runner(
     export: Callable[[], Path],
     threads: int | None,
     precision: Precision,
+    calibrate: Callable[[OnnxRunner], list[dict]] | None = None,
+    transformer: bool = False,
 ) -> tuple[OnnxRunner | None, Backend]:
     """The runner of ``backend`` for the graph that ``export()`` builds, or None for torch; and the backend that
-    runs. Any failure of an export or a runtime falls back to torch, with the reason, so a model always runs."""
+    runs. Any failure of an export or a runtime falls back to torch, with the reason, so a model always runs.
+
+    At ``int8`` precision on OpenVINO the graph is quantized (``posenet.quantize``): ``calibrate(runner)`` runs
+    a float32 ``runner`` on the calibration scenes and returns its recorded inputs (called only when the int8
+    graph is not cached yet); ``transformer`` selects NNCF's scheme for attention layers. If quantizing fails,
+    the float32 graph runs, and its precision's reason says why."""
     chosen = resolve_backend(backend, device)
     if chosen.name == "torch":
         return None, chosen
+    threads = threads or torch.get_num_threads()
     try:
-        return OnnxRunner(export(), chosen.name, threads or torch.get_num_threads(), precision), chosen
+        graph = export()
+        if precision.int8 and chosen.name == "openvino":
+            try:
+                from posenet.quantize import quantize_graph
+
+                float32 = functools.partial(OnnxRunner, graph, "openvino", threads, precision)
+                return OnnxRunner(quantize_graph(graph, lambda: calibrate(float32()), transformer), "openvino",
+                                  threads, precision), chosen  # fmt: skip
+            except Exception as exc:
+                log.warning("int8 quantization failed, running float32: %s", exc)
+                precision = Precision("fp32", f"int8 failed ({type(exc).__name__}: {exc}); float32")
+        return OnnxRunner(graph, chosen.name, threads, precision), chosen
     except Exception as exc:  # a broken runtime must leave a working (torch) model
         return None, Backend("torch", f"{chosen.name} failed ({type(exc).__name__}: {exc}); using torch")
 
@@ -177,14 +198,19 @@ class OnnxRunner:
 
     Args:
         path: the ``.onnx`` file.
+        path: the ``.onnx`` file, or OpenVINO's ``.xml`` (the int8 graphs of ``posenet.quantize``).
         backend: ``onnxruntime`` or ``openvino``.
         threads: intra-op threads (the service's ``ORPOSE_THREADS``).
-        precision: bf16 is used by OpenVINO only (ONNX Runtime's CPU provider computes float32).
+        precision: bf16 is used by OpenVINO only (ONNX Runtime's CPU provider computes float32); int8 means
+            ``path`` is a quantized graph (an ``.onnx`` path at int8 is the float32 graph awaiting quantization).
     """
 
     def __init__(self, path: str | Path, backend: str, threads: int, precision: Precision) -> None:
         self.path = Path(path)
         self.backend = backend
+        self.threads = threads
+        if backend == "openvino" and precision.int8 and self.path.suffix == ".onnx":
+            precision = Precision("fp32", "the float32 graph that int8 is calibrated from")
         self.precision = precision if backend == "openvino" else Precision("fp32", "ONNX Runtime runs fp32")
         if backend == "onnxruntime":
             import onnxruntime as ort
@@ -196,7 +222,6 @@ class OnnxRunner:
             self._session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
             self.input_names = [i.name for i in self._session.get_inputs()]
         elif backend == "openvino":
-            self._threads = threads
             self._compile()
             self.input_names = [p.get_any_name() for p in self._compiled.inputs]
             self._local = threading.local()  # an infer request per thread: requests are not thread-safe
@@ -210,7 +235,7 @@ class OnnxRunner:
         self._compiled = ov.Core().compile_model(
             str(self.path),
             "CPU",
-            {"INFERENCE_NUM_THREADS": self._threads, "INFERENCE_PRECISION_HINT": hint, "NUM_STREAMS": 1},
+            {"INFERENCE_NUM_THREADS": self.threads, "INFERENCE_PRECISION_HINT": hint, "NUM_STREAMS": 1},
         )
 
     def __call__(self, **inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:

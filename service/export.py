@@ -3,6 +3,7 @@ start otherwise): the shipped weights by default, or the checkpoints the service
 
     python -m service.export                                   # the shipped weights, into ~/.cache/or-pose
     python -m service.export --pose-checkpoint RUN/best --detector-checkpoint DET --cache-dir /models/onnx
+    python -m service.export --int8                            # also the int8 graphs (ORPOSE_PRECISION=int8)
     ORPOSE_CACHE_DIR=/models/onnx uvicorn service.app:app      # then finds them there
 
 Each graph is named by a hash of its weights, config and exporter (``posenet.runtime``), so the service only
@@ -31,6 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--pose-checkpoint", help="pose network checkpoint (default: the shipped weights)")
     p.add_argument("--detector-checkpoint", help="detector checkpoint (default: the shipped weights)")
     p.add_argument("--no-detector", action="store_true", help="only the pose network")
+    p.add_argument(
+        "--int8", action="store_true",
+        help="also the int8 OpenVINO graphs (ORPOSE_PRECISION=int8; posenet.quantize): renders the calibration "
+        "scenes and quantizes, about a minute",
+    )  # fmt: skip
     p.add_argument(
         "--cache-dir", type=Path, help="where the graphs go (default: $ORPOSE_CACHE_DIR or ~/.cache/or-pose)"
     )
@@ -66,6 +72,21 @@ def main(argv: list[str] | None = None) -> int:
         diff = max((a - b).abs().max().item() for a, b in zip(got, ref, strict=True))
         report = {"network": "detector", "graph": str(path), "seconds": round(time.perf_counter() - t0, 1)}
         print(json.dumps({**report, "max_abs_diff_vs_torch": diff}))
+    if args.int8:
+        networks = [("pose", PoseEstimator, args.pose_checkpoint)]
+        if not args.no_detector:
+            networks.append(("detector", PersonDetector, args.detector_checkpoint))
+        for name, cls, checkpoint in networks:
+            t0 = time.perf_counter()
+            net = cls.from_checkpoint(checkpoint, precision="int8", backend="openvino")
+            runner = net.model.runner if name == "pose" else net.runner
+            graph = str(runner.path) if runner is not None else None
+            report = {"network": name, "graph": graph, "precision": net.precision.name}
+            print(
+                json.dumps(
+                    {**report, "reason": net.precision.reason, "seconds": round(time.perf_counter() - t0, 1)}
+                )
+            )
     print(json.dumps({"cache_dir": str(cache_dir())}))
     return 0
 

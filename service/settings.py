@@ -26,9 +26,11 @@ class Settings(BaseSettings):
     device: str = Field("cpu", description="torch device for both models, e.g. 'cpu' or 'cuda:0'")
     # Chosen for the machine that serves, never by the one that trained (posenet.execution): bf16 only where it is
     # native (AVX512-BF16, AMX, a GPU); on AVX2-only CPUs bf16 is emulated and 7-20x slower than fp32.
-    precision: Literal["auto", "fp32", "bf16"] = Field(
+    # int8 (posenet.quantize): both networks quantized for OpenVINO, the fastest on AVX2-only CPUs; never auto.
+    precision: Literal["auto", "fp32", "bf16", "int8"] = Field(
         "auto",
-        description="model precision: auto (bf16 only where the device computes it natively), fp32, bf16",
+        description="model precision: auto (bf16 only where the device computes it natively), fp32, bf16, or "
+        "int8 (OpenVINO's quantized graphs, calibrated on rendered scenes at first start)",
     )
     # posenet.runtime: the ONNX graphs are exported from the loaded weights at start-up and cached in
     # $ORPOSE_CACHE_DIR (default ~/.cache/or-pose); `python -m service.export` builds them ahead of time.
