@@ -26,6 +26,11 @@ BONES: tuple[tuple[int, int], ...] = (
     (0, 1), (1, 3), (3, 7), (3, 5), (7, 9), (1, 2), (2, 4), (2, 6), (6, 8), (4, 5),
 )  # fmt: skip
 
+# A typical adult's bone lengths in mm, in the order of BONES: the medians over the 1,061 3D poses of the real MVOR
+# annotation (camma_mvor_2018.json), left and right averaged. Only their proportions are used (posenet.track
+# scales them to each person).
+BONE_TEMPLATE_MM: tuple[float, ...] = (116.0, 190.5, 251.0, 409.0, 188.0, 190.5, 409.0, 251.0, 188.0, 320.0)
+
 LEFT_RIGHT_PAIRS: tuple[tuple[int, int], ...] = ((2, 3), (4, 5), (6, 7), (8, 9))
 
 

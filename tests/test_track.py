@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from posenet.data.synth.poses import PoseParams, build_pose
-from posenet.skeleton import JOINT_INDEX, NUM_JOINTS
-from posenet.track import Tracker, TrackerConfig, bone_lengths, project_bones, torso_length
+from posenet.skeleton import BONE_TEMPLATE_MM, JOINT_INDEX, NUM_JOINTS
+from posenet.track import Tracker, TrackerConfig, bone_lengths, project_bones, robust_prior, torso_length
 from posenet.track_eval import SequenceFrame, TrackedPerson, evaluate, run_tracker, score
 
 FPS = 15.0
@@ -162,6 +162,23 @@ def test_bone_projection_meets_the_prior_and_moves_the_uncertain_end():
         0, 0, 2
     ] == pytest.approx(100)
     assert np.array_equal(out[0, 2:], two[0, 2:])  # the joints of bones without a prior stay
+
+
+def test_bone_prior_is_the_template_scaled_to_the_person():
+    rng = np.random.default_rng(0)
+    template = np.asarray(BONE_TEMPLATE_MM)
+    history = np.full((1, 150, len(template)), np.nan)
+    history[0, :60] = 1.1 * template * (1 + 0.15 * rng.standard_normal((60, len(template))))  # a tall person
+    history[0, 5:8, 3] = 2000.0  # a few wild lengths of one bone do not move a median
+    prior = robust_prior(history, 1, np.inf, 0.0)[0]
+    np.testing.assert_allclose(prior / template, 1.1, atol=0.02)  # one scale, every bone in proportion
+    own = robust_prior(history, 1, 0.0)[0]  # each bone's own median: noisier proportions
+    assert np.abs(own / template - 1.1).max() > np.abs(prior / template - 1.1).max()
+    # Young tracks lean on the average adult: after 2 frames, a prior of 10 frames keeps the scale near 1.
+    young = history.copy()
+    young[0, 2:] = np.nan
+    assert abs(robust_prior(young, 1, np.inf, 10.0)[0, 0] / template[0] - 1.0) < 0.05
+    assert np.isnan(robust_prior(young, 3, np.inf, 10.0)).all()  # fewer lengths than asked for: no prior
 
 
 def test_time_must_move_forward_and_inputs_be_finite():
