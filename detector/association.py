@@ -214,6 +214,12 @@ def main(argv: list[str] | None = None) -> dict:
         help="'none': the paper's order (more views first); a number: all combinations by mean distance minus "
         "this per view beyond the first",
     )  # fmt: skip
+    sweep.add_argument(
+        "--link-reward-mm", nargs="+", default=[default.link_reward_mm],
+        type=lambda x: None if x.lower() == "none" else float(x),
+        help="'none': the greedy rule; a number: one optimal partition per frame, each link earning this much "
+        "against its group's mean distance (detector.matching.choose_optimally)",
+    )  # fmt: skip
     parser.add_argument("--out", help="also write the metrics to this json file")
     args = parser.parse_args(argv)
 
@@ -235,11 +241,15 @@ def main(argv: list[str] | None = None) -> dict:
     if args.predictions:
         predictions = json.loads(Path(args.predictions).read_text())
     configs = [
-        SkeletonMatchConfig(threshold_mm=t, centre_gate_mm=g, same_view_mm=s, member_bonus_mm=b)
+        SkeletonMatchConfig(
+            threshold_mm=t, centre_gate_mm=g, same_view_mm=s, member_bonus_mm=b, link_reward_mm=r
+        )
         for t in args.skeleton_mm
         for s in args.same_view_mm
         for g in args.centre_gate_mm
-        for b in args.member_bonus_mm
+        for b, r in dict.fromkeys(  # a member bonus orders the greedy rule: it goes without a link reward
+            (b, None if b is not None else r) for b in args.member_bonus_mm for r in args.link_reward_mm
+        )
     ]
     sweeping = args.matcher == "skeletons" and len(configs) > 1
     if len(configs) > 1 and not sweeping:
@@ -251,14 +261,15 @@ def main(argv: list[str] | None = None) -> dict:
     boxes = "detected" if predictions is not None else "reference"
     if sweeping:
         print(
-            "| across views, mm | same view, mm | centre gate, mm | member bonus, mm | found | split | merged | "
-            "missed | mean IoU |"
+            "| across views, mm | same view, mm | centre gate, mm | member bonus, mm | link reward, mm | found | "
+            "split | merged | missed | mean IoU |"
         )
-        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for c, m in zip(configs, metrics, strict=True):
             m.update(boxes=boxes, matcher=args.matcher, config=dataclasses.asdict(c))
             bonus = "none" if c.member_bonus_mm is None else f"{c.member_bonus_mm:g}"
-            print(f"| {c.threshold_mm:g} | {c.same_view_mm:g} | {c.centre_gate_mm:g} | {bonus} | {m['found_rate']:.3f} | "
+            reward = "none" if c.link_reward_mm is None else f"{c.link_reward_mm:g}"
+            print(f"| {c.threshold_mm:g} | {c.same_view_mm:g} | {c.centre_gate_mm:g} | {bonus} | {reward} | {m['found_rate']:.3f} | "
                   f"{m['split_rate']:.3f} | {m['merged_rate']:.3f} | {m['missed_rate']:.3f} | {m['mean_iou']:.3f} |")  # fmt: skip
     else:
         metrics["boxes"] = boxes

@@ -46,11 +46,13 @@ class PipelineConfig:
     # matcher, or "skeletons", each box's single-view skeleton from the pose network (detector.skeleton_matching;
     # the U-Net still runs once per box). Skeletons by default: on day 4 of the twin and of the unseen alt look
     # it splits and merges fewer persons and gives lower two-stage MPJPE than the centres (docs/detector.md).
+    # "skeletons-greedy" groups the same skeletons by the paper's greedy rule instead of one optimal partition
+    # per frame (detector.matching.choose_optimally), for the ablation.
     matcher: str = "skeletons"
 
     def __post_init__(self) -> None:
-        if self.matcher not in ("centres", "skeletons"):
-            raise ValueError(f"matcher must be 'centres' or 'skeletons', got {self.matcher!r}")
+        if self.matcher not in ("centres", "skeletons", "skeletons-greedy"):
+            raise ValueError(f"matcher must be 'centres', 'skeletons' or 'skeletons-greedy', got {self.matcher!r}")
 
 
 @dataclass
@@ -260,7 +262,7 @@ class ScenePipeline:
         heat, members = None, None
         if person_ids is not None:
             ids, groups = group_by_ids(person_ids)
-        elif any(len(b) for b in boxes) and self.config.matcher == "skeletons":
+        elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
             boxes, scores = self._fit_boxes(boxes, scores, limit, why)
             heat, timings["match"], groups, members = self._match_skeletons(boxes, views)
             timings["pose"] += _ms(t0) - timings["match"]
@@ -332,11 +334,12 @@ class ScenePipeline:
 
         Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds spent after
         the U-Net, per person and view the indices of its boxes there, and their ``(P, S)`` box numbers."""
-        from detector.skeleton_matching import match_heatmaps, members_of, view_members
+        from detector.skeleton_matching import SkeletonMatchConfig, match_heatmaps, members_of, view_members
 
         heat = self.pose.box_heatmaps(list(views), boxes)
         t0 = time.perf_counter()
-        groups = match_heatmaps(heat, views, boxes, max_combinations=self.config.max_match_combinations)
+        config = SkeletonMatchConfig(link_reward_mm=None) if self.config.matcher == "skeletons-greedy" else None
+        groups = match_heatmaps(heat, views, boxes, config, max_combinations=self.config.max_match_combinations)
         return heat, _ms(t0), [view_members(g) for g in groups], members_of(groups, boxes)
 
     # ----------------------------------------------------------------------------------------- offline

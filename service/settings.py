@@ -62,10 +62,11 @@ class Settings(BaseSettings):
     # detector.skeleton_matching: group boxes by each box's single-view skeleton from the pose network instead
     # of the paper's box centres (measured better on day 4 of both looks, docs/detector.md); centres for the
     # paper's ablation.
-    matcher: Literal["centres", "skeletons"] = Field(
+    matcher: Literal["centres", "skeletons", "skeletons-greedy"] = Field(
         "skeletons",
         description="how boxes without person_ids are grouped across views: centres (the paper's 3D box "
-        "centres, 75 cm) or skeletons (each box's single-view 3D skeleton)",
+        "centres, 75 cm), skeletons (each box's single-view 3D skeleton, one optimal partition per frame) or "
+        "skeletons-greedy (the same skeletons, the paper's greedy rule)",
     )
     retry_after_s: int = Field(1, ge=1, le=3600, description="Retry-After seconds sent with a 503")
     # 3 views of 640x480 PNG colour + depth are about 2-3 MB; 64 MiB leaves room for 8 large views.

@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 import torch
 
-from detector.matching import box_centres_3d, box_depths, match_boxes, valid_combinations
+from detector.matching import (
+    box_centres_3d,
+    box_depths,
+    choose_greedily,
+    choose_optimally,
+    combinations_within,
+    match_boxes,
+    valid_combinations,
+)
 from posenet.cameras import Camera
 
 W, H = 320, 240
@@ -189,6 +197,52 @@ def test_greedy_prefers_larger_then_closer():
     assert [m.shape[1] for m, _ in combos] == [2, 3]
     groups = match_boxes([b for b, _, _ in views], [d for _, d, _ in views], cams)
     assert len(groups) == 1 and groups[0].size == 3
+
+
+def _partition_cost(chosen, reward):
+    return sum((len(m) - 1) * (mean - reward) for m, mean in chosen)
+
+
+def test_optimal_partition_gives_back_the_neighbour_s_box():
+    """Person a has boxes 0, 2, 4 (views 0, 1, 2), person b boxes 1, 3 (views 0, 1). The closest triple (0, 3,
+    4) takes b's box: greedy then leaves a's and b's other boxes alone; the optimal partition groups a and b."""
+    view = np.array([0, 0, 1, 1, 2])
+    d = np.full((5, 5), np.inf)
+    for (i, j), v in {(0, 2): 320, (0, 4): 280, (2, 4): 300, (1, 3): 100, (0, 3): 250, (3, 4): 240,
+                      (1, 2): 900, (1, 4): 900}.items():  # fmt: skip
+        d[i, j] = d[j, i] = v
+    combos = combinations_within(d, view, 600.0)
+    greedy = [tuple(m) for m, _ in choose_greedily(combos, 5)]
+    assert greedy == [(0, 3, 4), (1,), (2,)]
+    best = choose_optimally(combos, 5, 600.0)
+    assert [tuple(m) for m, _ in best] == [(0, 2, 4), (1, 3)]
+    assert _partition_cost(best, 600.0) < _partition_cost(choose_greedily(combos, 5), 600.0)
+
+
+def test_optimal_partition_is_a_partition_and_never_worse_than_greedy(monkeypatch):
+    import detector.matching
+
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        view = np.sort(rng.integers(0, 4, rng.integers(1, 12)))
+        pts = rng.uniform(0, 2500, (len(view), 3))
+        d = np.linalg.norm(pts[:, None] - pts[None], axis=-1)
+        combos = combinations_within(d, view, 700.0)
+        for reward in (300.0, 700.0, 1e5):
+            best = choose_optimally(combos, len(view), reward)
+            items = np.sort(np.concatenate([m for m, _ in best]))
+            np.testing.assert_array_equal(items, np.arange(len(view)))  # every box exactly once
+            for m, _ in best:
+                assert len(set(view[m])) == len(m)  # one box per view
+            greedy = choose_greedily(combos, len(view))
+            assert _partition_cost(best, reward) <= _partition_cost(greedy, reward) + 1e-6
+            # the subset search and the integer program find partitions of the same cost
+            monkeypatch.setattr(detector.matching, "_SEARCH_ITEMS", 0)
+            by_milp = choose_optimally(combos, len(view), reward)
+            monkeypatch.undo()
+            assert abs(_partition_cost(by_milp, reward) - _partition_cost(best, reward)) < 1e-6
+        # a huge reward: as few persons as any partition, so never more than greedy's
+        assert len(choose_optimally(combos, len(view), 1e5)) <= len(choose_greedily(combos, len(view)))
 
 
 def test_bad_input_raises():

@@ -196,6 +196,10 @@ def test_pipeline_with_the_skeleton_matcher(tiny):
             alone = est.predict(Scene.from_person_boxes(views, [person.boxes]))
             np.testing.assert_allclose(person.joints, alone.joints[0], atol=1e-2)
     assert single > 0
+    greedy = ScenePipeline(est, config=PipelineConfig(matcher="skeletons-greedy")).run(views, boxes)
+    assert greedy.persons and sum(len(p.support) for p in greedy.persons) <= sum(len(b) for b in boxes)
+    with pytest.raises(ValueError, match="skeletons-greedy"):
+        PipelineConfig(matcher="nearest")
     for matcher in ("centres", "skeletons"):
         m = evaluate_association(tiny[1], matcher=matcher, pose=est, progress=False)
         assert m["found"] + m["split"] + m["merged"] + m["missed"] == m["persons"] > 0
