@@ -227,10 +227,12 @@ def choose_optimally(
     combos: list[tuple[np.ndarray, np.ndarray]], n: int, link_reward: float
 ) -> list[tuple[np.ndarray, float]]:
     """One partition of the ``n`` items for the whole frame instead of the greedy order: the combinations (each
-    item in exactly one, items left alone as single-item groups) that minimise the sum over groups of
-    ``(members - 1) * (mean_distance - link_reward)``. Linking an item to a group earns ``link_reward`` and costs
-    its group's mean distance, so a large reward prefers fewer persons, as the paper's rule does, but over the
-    whole frame: a triple that would take a neighbour's item loses to a triple and a pair that fit better.
+    item in exactly one, items left alone as single-item groups) that minimise the sum over every pair of items
+    grouped together of ``distance - link_reward``. A pair closer than the reward is worth grouping, and a group
+    of m items counts its m (m - 1) / 2 pairs, so a whole person seen in three views outweighs two pairs that
+    would each be a little closer (a sum over links, m - 1 per group, preferred those two pairs and split the
+    person: measured on a rendered sequence), while a triple that holds a neighbour's item loses to the triple
+    and the pair that fit better (the greedy rule's failure).
 
     Solved exactly, per group of items that share combinations: a memoised search over subsets for small
     groups, scipy's ``milp`` for large ones. Returns ``(members, mean_distance)`` in :func:`choose_greedily`'s
@@ -239,7 +241,7 @@ def choose_optimally(
     members = [row for m, _ in blocks for row in m]
     means = np.concatenate([mean for _, mean in blocks]) if blocks else np.zeros(0)
     sizes = np.array([len(m) for m in members], np.int64)
-    cost = (sizes - 1) * (means - link_reward)
+    cost = sizes * (sizes - 1) / 2 * (means - link_reward)  # the sum over its pairs of (distance - reward)
     useful = np.flatnonzero(cost < 0)  # a combination that costs more than its items alone is never chosen
     picked: list[int] = []
     if len(useful):

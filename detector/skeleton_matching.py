@@ -67,10 +67,10 @@ class SkeletonMatchConfig:
     # order, its mean skeleton distance minus this per view beyond the first (``choose_greedily``).
     member_bonus_mm: float | None = None
     # None: the greedy order above. A number (mm): one partition for the whole frame (``choose_optimally``),
-    # each box linked to a group earning this much against its group's mean skeleton distance. Chosen on the
-    # held-out procedural scenes (seed 99, 2026-12-03): at 600 mm, persons found 70.0 -> 73.9 % (random look)
-    # and 75.0 -> 76.5 % (twin look), merged 4.6 -> 1.5 % and 3.0 -> 1.5 %, splits unchanged; 300 splits twice as
-    # many persons, 1000 and more merge more (docs/detector.md).
+    # each pair of grouped units earning this much against its skeleton distance. Chosen on the held-out
+    # procedural scenes (seed 99) and the tuning sequence (2026-12-03): at 600 mm, persons found 70.0 -> 73.1 %
+    # (random look), 75.0 -> 75.0 % (twin look), 63.5 -> 63.5 % (sequence), merged 4.6 -> 2.3 % on the random
+    # look; 400-500 split more, 800 merges more on the random look (docs/detector.md).
     link_reward_mm: float | None = 600.0
 
     def __post_init__(self) -> None:

@@ -200,7 +200,7 @@ def test_greedy_prefers_larger_then_closer():
 
 
 def _partition_cost(chosen, reward):
-    return sum((len(m) - 1) * (mean - reward) for m, mean in chosen)
+    return sum(len(m) * (len(m) - 1) / 2 * (mean - reward) for m, mean in chosen)  # over grouped pairs
 
 
 def test_optimal_partition_gives_back_the_neighbour_s_box():
@@ -217,6 +217,18 @@ def test_optimal_partition_gives_back_the_neighbour_s_box():
     best = choose_optimally(combos, 5, 600.0)
     assert [tuple(m) for m, _ in best] == [(0, 2, 4), (1, 3)]
     assert _partition_cost(best, 600.0) < _partition_cost(choose_greedily(combos, 5), 600.0)
+
+
+def test_optimal_partition_keeps_a_whole_person_against_two_closer_pairs():
+    """Boxes 0, 1, 2 (views 0, 1, 2) are one person, pairwise 200 / 500 / 500; box 3 (view 0) is another person's
+    whose skeleton lies 450 from box 2. Counting pairs (3 in the triple), the triple wins; counting links (2 in
+    the triple, 2 in two pairs) the pairs (0, 1) and (2, 3) would, splitting the person and merging box 3."""
+    view = np.array([0, 1, 2, 0])
+    d = np.full((4, 4), np.inf)
+    for (i, j), v in {(0, 1): 200, (0, 2): 500, (1, 2): 500, (2, 3): 450}.items():
+        d[i, j] = d[j, i] = v
+    best = choose_optimally(combinations_within(d, view, 600.0), 4, 600.0)
+    assert [tuple(m) for m, _ in best] == [(0, 1, 2), (3,)]
 
 
 def test_optimal_partition_is_a_partition_and_never_worse_than_greedy(monkeypatch):
