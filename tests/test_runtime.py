@@ -145,20 +145,31 @@ def test_a_failing_runtime_falls_back_to_torch(monkeypatch, tmp_path):
         assert "no such runtime here" in est.backend.reason
 
 
-def test_model_route_says_how_each_network_runs_and_on_what(tmp_path):
+@pytest.mark.parametrize("precision", ["fp32", "int8"])
+def test_model_route_says_how_each_network_runs_and_on_what(tmp_path, precision):
     import httpx
     from service_harness import Server, tiny_checkpoints
 
+    if precision == "int8" and not installed("openvino"):
+        pytest.skip("int8 runs on OpenVINO, which is not installed")
     pose, det = tiny_checkpoints(tmp_path / "ckpt")
-    backend = RUNTIMES[0] if RUNTIMES else "torch"
-    env = {"ORPOSE_POSE_CHECKPOINT": str(pose), "ORPOSE_DETECTOR_CHECKPOINT": str(det),
-           "ORPOSE_PRECISION": "fp32", "ORPOSE_BACKEND": backend, "ORPOSE_CACHE_DIR": str(tmp_path / "onnx")}  # fmt: skip
-    with Server(env) as url:
+    backend = "openvino" if precision == "int8" else RUNTIMES[0] if RUNTIMES else "torch"
+    env = {"ORPOSE_POSE_CHECKPOINT": str(pose), "ORPOSE_DETECTOR_CHECKPOINT": str(det), "ORPOSE_INT8_SCENES": "1",
+           "ORPOSE_PRECISION": precision, "ORPOSE_BACKEND": backend, "ORPOSE_CACHE_DIR": str(tmp_path / "onnx")}  # fmt: skip
+    with Server(env, startup_s=120) as url:
         info = httpx.get(f"{url}/model", timeout=30).json()
+        if precision == "int8":  # the quantized graphs answer a real frame
+            frame = {f"{k}_{i}": (f"{k}_{i}.{ext}", (FRAME / f"{k}_{i}.{ext}").read_bytes())
+                     for i in range(3) for k, ext in (("color", "jpg"), ("depth", "png"))}  # fmt: skip
+            r = httpx.post(f"{url}/scenes", data={"scene": (FRAME / "scene_boxes.json").read_text()},
+                           files=frame, timeout=60)  # fmt: skip
+            assert r.status_code == 200 and r.json()["persons"], r.text
     runtime = {r["network"]: r for r in info["runtime"]}
     assert set(runtime) == {"pose", "detector"}
     for r in runtime.values():
-        assert r["backend"] == backend and r["precision"] == "fp32" and r["precision_reason"]
+        assert r["backend"] == backend and r["precision"] == precision and r["precision_reason"]
+    if precision == "int8":
+        assert list((tmp_path / "onnx").glob("*-int8-*.xml"))  # built at first start, in the cache
     assert info["machine"]["torch_capability"] and info["machine"]["cores"] >= 1
 
 
