@@ -3,30 +3,31 @@
 On a CPU without native bf16 (AVX2-only: AMD Zen 2/3, older Xeons) float32 is the fastest torch can do, and the
 convolutions are ~90 % of both networks' time. OpenVINO runs int8 convolutions about 1.7-1.8x faster than float32
 there, and 3.6-4x on a CPU with AMX (``benchmarks/RESULTS.md``, issue 11), at a cost in accuracy that
-``benchmarks/backend_accuracy.py`` measures (day 4, reference boxes: +0.01 cm MPJPE on the twin, +0.03 cm on the
-unseen alt look; detector AP50 within 0.002). ``--precision int8`` / ``ORPOSE_PRECISION=int8`` asks for it; it is
+``benchmarks/backend_accuracy.py`` measures (day 4, reference boxes: +0.01 cm MPJPE on the twin, +0.02 cm on the
+unseen alt look; detector AP50 unchanged). ``--precision int8`` / ``ORPOSE_PRECISION=int8`` asks for it; it is
 never chosen by ``auto``, since it trades accuracy, however little, for speed.
 
 Post-training quantization needs inputs to measure each layer's range: **calibration scenes** that the package's
 own renderer draws at first use (``CALIBRATION``: the randomised look on MVOR's rig, a fixed seed, so every machine
-builds the same graph), never a look or a day that the figures are measured on. Each network is run in float32 on
-them, its inputs recorded at the runtime's boundary (:class:`Recorder`), and :func:`quantize_graph` writes the
-int8 graph beside the float32 one in the runtime cache, named by the float32 graph and the calibration, so it is
-built once per weights (``python -m service.export --precision int8`` builds it ahead of time).
+builds the same graph; kept in the runtime cache), never a look or a day that the figures are measured on. Each
+network is run in float32 on them, its inputs recorded at the runtime's boundary (:class:`Recorder`), and
+:func:`quantize_graph` writes the int8 graph beside the float32 one in the runtime cache, named by the float32
+graph and the calibration, so it is built once per weights (``python -m service.export --int8`` builds it ahead
+of time).
 """
 
 from __future__ import annotations
 
 import contextlib
-import functools
 import hashlib
 import io
 import json
 import logging
 import os
+import shutil
 import tempfile
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -45,25 +46,40 @@ def calibration_config() -> dict:
     return {**CALIBRATION, "scenes": scenes}
 
 
-@functools.cache
-def _rendered(config_json: str) -> tuple:
-    """The samples (images and annotations in memory) of the calibration scenes: rendered once per process."""
-    from posenet.data.mvor import MvorDataset, load_annotations
+def _rendered(config_json: str) -> Path:
+    """The folder of the calibration scenes, rendered once into the runtime cache (``posenet.runtime.cache_dir``,
+    ~10 MB, named by the calibration) and reused by every later build and process; the samples are read from it
+    when needed, so they do not stay in memory."""
     from posenet.data.synth.__main__ import main as synth
+    from posenet.runtime import cache_dir
 
     cfg = json.loads(config_json)
-    with tempfile.TemporaryDirectory(prefix="orpose-int8-") as tmp:
-        argv = ["--out", tmp, "--scenes", str(cfg["scenes"]), "--rig", cfg["rig"], "--look", cfg["look"]]
+    folder = cache_dir() / f"int8-calibration-{hashlib.sha256(config_json.encode()).hexdigest()[:12]}"
+    if (folder / "annotations.json").is_file():
+        return folder
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f"{folder.name}.", dir=folder.parent))
+    try:
+        argv = ["--out", str(tmp), "--scenes", str(cfg["scenes"]), "--rig", cfg["rig"], "--look", cfg["look"]]
         with contextlib.redirect_stdout(io.StringIO()):  # the renderer prints its summary
             synth(argv + ["--seed", str(cfg["seed"]), "--workers", "1", "--quiet"])
-        ann = load_annotations(Path(tmp) / "annotations.json")
-        ds = MvorDataset(tmp, ann, 1, ("color", "depth"))
-        return tuple(ds[i] for i in range(len(ds)))
+        try:
+            tmp.rename(folder)  # whole or not at all; another process may have finished first
+        except OSError:
+            if not (folder / "annotations.json").is_file():
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return folder
 
 
-def calibration_samples() -> tuple:
-    """The calibration scenes as :class:`posenet.data.sample.Sample`\\ s (``CALIBRATION``)."""
-    return _rendered(json.dumps(calibration_config(), sort_keys=True))
+def calibration_samples() -> Iterator:
+    """The calibration scenes (``CALIBRATION``) as ``posenet.data.sample.Sample`` s, read one at a time."""
+    from posenet.data.mvor import MvorDataset, load_annotations
+
+    folder = _rendered(json.dumps(calibration_config(), sort_keys=True))
+    dataset = MvorDataset(folder, load_annotations(folder / "annotations.json"), 1, ("color", "depth"))
+    return (dataset[i] for i in range(len(dataset)))
 
 
 class Recorder:
