@@ -22,7 +22,7 @@ import torch
 from tqdm import tqdm
 
 from posenet.evaluate import prediction_record
-from posenet.execution import RUN_PRECISIONS
+from posenet.execution import PRECISIONS
 from posenet.infer import PoseEstimator
 from posenet.inputs import InputConfig, reduction
 from posenet.scene import Scene
@@ -108,7 +108,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda")
     p.add_argument(
         "--precision",
-        choices=RUN_PRECISIONS,
+        choices=PRECISIONS,
         default="auto",
         help="how this machine runs it (posenet.execution)",
     )
