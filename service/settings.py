@@ -12,6 +12,8 @@ from typing import Literal
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from posenet.track import TrackerConfig
+
 
 class Settings(BaseSettings):
     """Every knob of the service. Each field is also the env var ``ORPOSE_<FIELD NAME IN CAPITALS>``."""
@@ -89,14 +91,14 @@ class Settings(BaseSettings):
     # posenet.track.TrackerConfig.max_spread_mm, chosen on rendered sequences with the shipped weights; another
     # checkpoint spreads its joints differently (random weights: ~1000 mm) and may need another value.
     track_max_spread_mm: float = Field(
-        400.0,
+        TrackerConfig.max_spread_mm,
         gt=0,
         description="persons whose median joint spread is above this many mm are answered without a track",
     )
     # posenet.track.TrackerConfig.min_torso_mm: shorter torsos (neck to mid-hip) are no adult's; on rendered
     # sequences they are the pose network's folded guess at the draped patient.
     track_min_torso_mm: float = Field(
-        380.0,
+        TrackerConfig.min_torso_mm,
         ge=0,
         le=2000,
         description="persons whose torso (neck to the middle of the hips) is shorter than this many mm are "
