@@ -169,6 +169,11 @@ def evaluate_association(
     return totals if skeleton_configs else totals[0]
 
 
+def _mm_or_none(text: str) -> float | None:
+    """A command-line millimetre value, or 'none'."""
+    return None if text.lower() == "none" else float(text)
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(
         prog="python -m detector.association",
@@ -209,16 +214,14 @@ def main(argv: list[str] | None = None) -> dict:
     sweep.add_argument("--centre-gate-mm", type=float, nargs="+", default=[default.centre_gate_mm],
                        help="box centres farther apart than this never match")  # fmt: skip
     sweep.add_argument(
-        "--member-bonus-mm", nargs="+", default=[default.member_bonus_mm],
-        type=lambda x: None if x.lower() == "none" else float(x),
+        "--member-bonus-mm", nargs="+", default=[default.member_bonus_mm], type=_mm_or_none,
         help="'none': the paper's order (more views first); a number: all combinations by mean distance minus "
         "this per view beyond the first",
     )  # fmt: skip
     sweep.add_argument(
-        "--link-reward-mm", nargs="+", default=[default.link_reward_mm],
-        type=lambda x: None if x.lower() == "none" else float(x),
-        help="'none': the greedy rule; a number: one optimal partition per frame, each link earning this much "
-        "against its group's mean distance (detector.matching.choose_optimally)",
+        "--link-reward-mm", nargs="+", default=[default.link_reward_mm], type=_mm_or_none,
+        help="'none': the greedy rule; a number: one optimal partition per frame, each pair of grouped boxes "
+        "earning this much against its skeleton distance (detector.matching.choose_optimally)",
     )  # fmt: skip
     parser.add_argument("--out", help="also write the metrics to this json file")
     args = parser.parse_args(argv)

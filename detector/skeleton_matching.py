@@ -16,9 +16,9 @@ The rule, for the N boxes of a frame:
    box in that view is their hull.
 3. **Across views.** Units of distinct views are grouped from the combinations whose members are pairwise within
    ``threshold_mm`` (the distance between units: the closest pair of their boxes). By default one partition for
-   the whole frame (``detector.matching.choose_optimally``): each unit linked to a group earns
-   ``link_reward_mm`` against the group's mean distance, and the cheapest set of groups wins, so a close triple
-   cannot take a neighbour's box that two better groups need. ``link_reward_mm=None`` is the paper's greedy rule
+   the whole frame (``detector.matching.choose_optimally``): each pair of units grouped together earns
+   ``link_reward_mm`` against its distance, and the cheapest set of groups wins, so a close triple cannot take a
+   neighbour's box that two better groups need. ``link_reward_mm=None`` is the paper's greedy rule
    (more members first, then the closest). Box centres farther apart than ``centre_gate_mm`` never match: a
    sanity bound, wider than the centre matcher's 75 cm because the centre is what fails.
 4. Units left over are persons seen in one view.

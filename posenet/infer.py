@@ -97,9 +97,8 @@ class PoseEstimator:
         """The U-Net's inputs on the int8 calibration scenes (``posenet.quantize``), run by ``runner``."""
         from posenet.quantize import Recorder, calibration_samples
 
-        recorder, self.model.runner = Recorder(runner), None
+        recorder = self.model.runner = Recorder(runner)
         try:
-            self.model.runner = recorder
             for sample in calibration_samples():
                 self.predict(Scene.from_sample(sample, "boxed"))
         finally:

@@ -107,10 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda")
     p.add_argument(
-        "--precision",
-        choices=PRECISIONS,
-        default="auto",
-        help="how this machine runs it (posenet.execution)",
+        "--precision", choices=PRECISIONS, default="auto", help="how this machine runs it (posenet.execution)"
     )
     p.add_argument(
         "--flip-test",

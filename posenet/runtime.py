@@ -106,7 +106,8 @@ def load_runner(
             try:
                 from posenet.quantize import quantize_graph
 
-                float32 = functools.partial(OnnxRunner, graph, "openvino", threads, precision)
+                fp32 = Precision("fp32", "the float32 graph that int8 is calibrated from")
+                float32 = functools.partial(OnnxRunner, graph, "openvino", threads, fp32)
                 return OnnxRunner(quantize_graph(graph, lambda: calibrate(float32()), transformer), "openvino",
                                   threads, precision), chosen  # fmt: skip
             except Exception as exc:
@@ -197,20 +198,17 @@ class OnnxRunner:
     """An exported graph called like the module it came from: torch tensors in, a tuple of tensors out.
 
     Args:
-        path: the ``.onnx`` file.
         path: the ``.onnx`` file, or OpenVINO's ``.xml`` (the int8 graphs of ``posenet.quantize``).
         backend: ``onnxruntime`` or ``openvino``.
         threads: intra-op threads (the service's ``ORPOSE_THREADS``).
         precision: bf16 is used by OpenVINO only (ONNX Runtime's CPU provider computes float32); int8 means
-            ``path`` is a quantized graph (an ``.onnx`` path at int8 is the float32 graph awaiting quantization).
+            ``path`` is a quantized graph.
     """
 
     def __init__(self, path: str | Path, backend: str, threads: int, precision: Precision) -> None:
         self.path = Path(path)
         self.backend = backend
         self.threads = threads
-        if backend == "openvino" and precision.int8 and self.path.suffix == ".onnx":
-            precision = Precision("fp32", "the float32 graph that int8 is calibrated from")
         self.precision = precision if backend == "openvino" else Precision("fp32", "ONNX Runtime runs fp32")
         if backend == "onnxruntime":
             import onnxruntime as ort
