@@ -94,7 +94,8 @@ class TrackerConfig:
     # How many frames' worth of trust the average adult's scale (1.0: the template itself) gets against the
     # median of the track's per-frame scales (each the median over bones of length / template). 10 until
     # 2026-12-03; with the detector of that day, which also boxes people cut by the image edge, the measured
-    # scales wandered (served skeletons 5-15 % short, more so when half seen) and so did every corrected bone.
+    # scales wandered (one track's shoulder-to-hip length drifted 400 -> 350 mm over 42 frames; truth 426 mm),
+    # and so did every corrected bone.
     # Chosen again offline on the two tuning sequences (seeds 1 and 2): 10 / 30 / 100 / 300 / inf gave a worst
     # bone std of 11.2 / 8.6 / 5.3 / 3.3 / 2.2 and 16.6 / 14.2 / 9.6 / 5.5 / 1.9 mm, smoothed / per-frame MPJPE
     # 0.924 / 0.918 / 0.913 / 0.911 / 0.910 and 1.068 / 1.045 / 1.007 / 0.983 / 0.981. 300 (20 s at 15 fps)
