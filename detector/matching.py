@@ -248,11 +248,12 @@ def choose_optimally(
         # Items linked by a useful combination form components that can be solved apart.
         rows = np.concatenate([members[c] for c in useful])
         cols = np.repeat(np.arange(len(useful)), sizes[useful])
-        link = np.zeros((n, len(useful)), bool)
-        link[rows, cols] = True
-        _, label = connected_components(_bool_product(link), directed=False)
-        for comp in np.unique(label[rows]):
-            in_comp = [int(c) for c in useful if label[members[c][0]] == comp]
+        link = np.zeros((n, len(useful)), np.int32)
+        link[rows, cols] = 1
+        _, label = connected_components(link @ link.T > 0, directed=False)  # items sharing a combination
+        comp_of = label[[members[c][0] for c in useful]]  # (len(useful),) each combination's component
+        for comp in np.unique(comp_of):
+            in_comp = [int(c) for c in useful[comp_of == comp]]
             items = np.flatnonzero(label == comp)
             solve = _search if len(items) <= _SEARCH_ITEMS else _milp
             picked += solve([members[c] for c in in_comp], cost[in_comp], items, in_comp)
@@ -263,12 +264,6 @@ def choose_optimally(
     for m, _ in chosen:
         used[m] = True
     return chosen + [(np.array([b]), 0.0) for b in np.flatnonzero(~used)]
-
-
-def _bool_product(link: np.ndarray) -> np.ndarray:
-    """``(n, n)`` items that share a column of ``link (n, C)``."""
-    a = link.astype(np.int32)
-    return (a @ a.T) > 0
 
 
 def _search(members: list, cost: np.ndarray, items: np.ndarray, ids: list[int]) -> list[int]:
