@@ -30,7 +30,13 @@ from scipy.optimize import linear_sum_assignment
 from tqdm import tqdm
 
 from detector.matching import Group, match_boxes
-from detector.skeleton_matching import MATCHERS, SkeletonMatchConfig, match_heatmaps
+from detector.skeleton_matching import (
+    CANDIDATE_SCORE,
+    MATCHERS,
+    SkeletonMatchConfig,
+    match_heatmaps,
+    split_unsure,
+)
 from posenet.boxes import boxes_of_person, coco_to_xyxy, dense_boxes, iou_xyxy, match_persons, person_ids
 from posenet.scene import views_of
 
@@ -55,7 +61,7 @@ def frame_association(
     """
     V = len(gt_boxes)
     persons = person_ids(gt_ids)
-    # Which group holds each predicted box: owner[v][k].
+    # Which group holds each predicted box: owner[v][k] (-1: an unsure box that completed nobody, not a person).
     owner = [np.full(len(b), -1) for b in pred_boxes]
     for gi, g in enumerate(groups):
         for v, k in [*enumerate(g.indices), *g.extra]:
@@ -67,7 +73,7 @@ def frame_association(
     for v in range(V):
         if len(gt_boxes[v]) == 0 or len(pred_boxes[v]) == 0:
             continue
-        iou = iou_xyxy(gt_boxes[v], pred_boxes[v])  # (G_v, K_v)
+        iou = iou_xyxy(gt_boxes[v], pred_boxes[v]) * (owner[v] >= 0)  # (G_v, K_v)
         rows, cols = linear_sum_assignment(-iou)
         for r, c in zip(rows, cols, strict=True):
             pid = int(gt_ids[v][r])
@@ -104,13 +110,18 @@ def _paper_score(gt_boxes, gt_ids, pred_boxes, groups, persons) -> float:
     return float(scores.sum())
 
 
-def results_by_image(predictions: list[dict], score_threshold: float) -> dict[int, np.ndarray]:
-    """COCO results to ``{image_id: (K, 4) xyxy}`` keeping scores >= ``score_threshold``."""
+def results_by_image(
+    predictions: list[dict], score_threshold: float
+) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    """COCO results to ``{image_id: ((K, 4) xyxy, (K,) scores)}`` keeping scores >= ``score_threshold``."""
     out: dict[int, list] = defaultdict(list)
     for p in predictions:
         if p.get("score", 1.0) >= score_threshold:
-            out[int(p["image_id"])].append(p["bbox"])
-    return {k: coco_to_xyxy(np.asarray(v, np.float64).reshape(-1, 4)) for k, v in out.items()}
+            out[int(p["image_id"])].append([*p["bbox"], p.get("score", 1.0)])
+    return {
+        k: (coco_to_xyxy(np.asarray(v, np.float64)[:, :4]), np.asarray(v, np.float64)[:, 4])
+        for k, v in out.items()
+    }
 
 
 def evaluate_association(
@@ -122,6 +133,7 @@ def evaluate_association(
     matcher: str = "centres",
     pose=None,
     skeleton_configs: list[SkeletonMatchConfig] | None = None,
+    candidate_score: float | None = None,
 ) -> dict | list[dict]:
     """Association metrics over ``samples`` (``Sample``s with depth); see the module docstring.
 
@@ -129,6 +141,8 @@ def evaluate_association(
     "skeletons" groups them with ``pose`` (a ``posenet.infer.PoseEstimator``) instead of the box centres, with
     the default :class:`SkeletonMatchConfig`; given ``skeleton_configs``, with each of them from the same
     heatmaps (the pose network runs once per frame), and the result is one metrics dict per config.
+    ``candidate_score`` (skeleton matcher, detected boxes): boxes scored from it up to ``score_threshold`` may
+    complete persons, as in the service (``service.pipeline.PipelineConfig.candidate_score``).
     """
     if matcher not in MATCHERS:
         raise ValueError(f"matcher must be one of {MATCHERS}, got {matcher!r}")
@@ -137,16 +151,22 @@ def evaluate_association(
     configs = skeleton_configs or [SkeletonMatchConfig()]
     if skeleton_configs and matcher != "skeletons":
         raise ValueError("skeleton_configs are thresholds of the skeleton matcher: pass matcher='skeletons'")
-    detected = None if predictions is None else results_by_image(predictions, score_threshold)
+    unsure = matcher == "skeletons" and candidate_score is not None and candidate_score < score_threshold
+    lowest = candidate_score if unsure else score_threshold
+    detected = None if predictions is None else results_by_image(predictions, lowest)
     runs = len(configs) if matcher == "skeletons" else 1
     totals = [{**dict.fromkeys(COUNTS, 0), "iou_sum": 0.0} for _ in range(runs)]
     for sample in tqdm(samples, desc="associate", unit="frame", disable=not progress):
         gt_boxes = [np.asarray(v.boxes, np.float64).reshape(-1, 4) for v in sample.views]
         gt_ids = [np.asarray(v.box_person_ids) for v in sample.views]
+        candidate = None
         if detected is None:
             pred = gt_boxes
         else:
-            pred = [detected.get(int(v.image_id), np.zeros((0, 4))) for v in sample.views]
+            found = [detected.get(int(v.image_id), (np.zeros((0, 4)), np.zeros(0))) for v in sample.views]
+            pred = [b for b, _ in found]
+            if unsure:
+                pred, _, candidate = split_unsure(pred, [s for _, s in found], score_threshold)
         depths = []
         for v in sample.views:
             if v.depth is None:
@@ -155,7 +175,10 @@ def evaluate_association(
         if matcher == "skeletons":
             views = views_of(sample)
             heat = pose.box_heatmaps(views, pred)
-            groupings = [match_heatmaps(heat, views, pred, c, max_combinations=PAIRS_LIMIT) for c in configs]
+            groupings = [
+                match_heatmaps(heat, views, pred, c, max_combinations=PAIRS_LIMIT, candidate=candidate)
+                for c in configs
+            ]
         else:
             groupings = [match_boxes(pred, depths, sample.cameras, threshold_mm)]
         for total, groups in zip(totals, groupings, strict=True):
@@ -187,6 +210,11 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--days", type=int, nargs="+", help="only these recording days")
     parser.add_argument("--score-threshold", type=float, default=0.5, help="lowest detection score used")
     parser.add_argument("--threshold-mm", type=float, default=750.0, help="the matcher's t (paper: 75 cm)")
+    parser.add_argument(
+        "--candidate-score", type=_mm_or_none, default=CANDIDATE_SCORE,
+        help="skeleton matcher: detected boxes scored from this up to --score-threshold may complete a person "
+        f"seen in other views, as in the service (default {CANDIDATE_SCORE}; 'none': sure boxes only)",
+    )  # fmt: skip
     parser.add_argument(
         "--matcher", choices=MATCHERS, default="centres",
         help="centres: the paper's 3D box centres; skeletons: each box's single-view skeleton (pose network)",
@@ -223,6 +251,20 @@ def main(argv: list[str] | None = None) -> dict:
         help="'none': the greedy rule; a number: one optimal partition per frame, each pair of grouped boxes "
         "earning this much against its skeleton distance (detector.matching.choose_optimally)",
     )  # fmt: skip
+    sweep.add_argument(
+        "--candidate-mm",
+        nargs="+",
+        default=[default.candidate_mm],
+        type=_mm_or_none,
+        help="an unsure box joins a person whose fused skeleton lies within this ('none': never)",
+    )
+    sweep.add_argument(
+        "--outlier-mm",
+        nargs="+",
+        default=[default.outlier_mm],
+        type=_mm_or_none,
+        help="a box this far from the rest of its person (>= 3 boxes) leaves it ('none': never)",
+    )
     parser.add_argument("--out", help="also write the metrics to this json file")
     args = parser.parse_args(argv)
 
@@ -245,9 +287,17 @@ def main(argv: list[str] | None = None) -> dict:
         predictions = json.loads(Path(args.predictions).read_text())
     configs = [
         SkeletonMatchConfig(
-            threshold_mm=t, centre_gate_mm=g, same_view_mm=s, member_bonus_mm=b, link_reward_mm=r
-        )
+            threshold_mm=t,
+            centre_gate_mm=g,
+            same_view_mm=s,
+            member_bonus_mm=b,
+            link_reward_mm=r,
+            candidate_mm=c,
+            outlier_mm=o,
+        )  # fmt: skip
         for t in args.skeleton_mm
+        for c in args.candidate_mm
+        for o in args.outlier_mm
         for s in args.same_view_mm
         for g in args.centre_gate_mm
         for b, r in dict.fromkeys(  # a member bonus orders the greedy rule: it goes without a link reward
@@ -259,20 +309,22 @@ def main(argv: list[str] | None = None) -> dict:
         parser.error("several thresholds are a sweep of the skeleton matcher: add --matcher skeletons")
     metrics = evaluate_association(
         samples, predictions, args.score_threshold, args.threshold_mm, matcher=args.matcher, pose=pose,
-        skeleton_configs=configs if sweeping else None,
+        skeleton_configs=configs if sweeping else None, candidate_score=args.candidate_score,
     )  # fmt: skip
     boxes = "detected" if predictions is not None else "reference"
     if sweeping:
         print(
-            "| across views, mm | same view, mm | centre gate, mm | member bonus, mm | link reward, mm | found | "
-            "split | merged | missed | mean IoU |"
+            "| across views, mm | same view, mm | centre gate, mm | member bonus, mm | link reward, mm | unsure, mm "
+            "| outlier, mm | found | split | merged | missed | mean IoU |"
         )
-        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for c, m in zip(configs, metrics, strict=True):
             m.update(boxes=boxes, matcher=args.matcher, config=dataclasses.asdict(c))
             bonus = "none" if c.member_bonus_mm is None else f"{c.member_bonus_mm:g}"
             reward = "none" if c.link_reward_mm is None else f"{c.link_reward_mm:g}"
-            print(f"| {c.threshold_mm:g} | {c.same_view_mm:g} | {c.centre_gate_mm:g} | {bonus} | {reward} | {m['found_rate']:.3f} | "
+            unsure, outlier = (("none" if x is None else f"{x:g}") for x in (c.candidate_mm, c.outlier_mm))
+            print(f"| {c.threshold_mm:g} | {c.same_view_mm:g} | {c.centre_gate_mm:g} | {bonus} | {reward} | {unsure} | "
+                  f"{outlier} | {m['found_rate']:.3f} | "
                   f"{m['split_rate']:.3f} | {m['merged_rate']:.3f} | {m['missed_rate']:.3f} | {m['mean_iou']:.3f} |")  # fmt: skip
     else:
         metrics["boxes"] = boxes

@@ -22,6 +22,18 @@ The rule, for the N boxes of a frame:
    (more members first, then the closest). Box centres farther apart than ``centre_gate_mm`` never match: a
    sanity bound, wider than the centre matcher's 75 cm because the centre is what fails.
 4. Units left over are persons seen in one view.
+5. **Boxes the detector was unsure of** (optional, ``candidate``): a box scored below the detector's threshold
+   never starts a person, but it may complete one. After the grouping above, each person without a box in a
+   view may take that view's unsure box whose single-view skeleton lies within ``candidate_mm`` of the person's
+   fused skeleton (one box per person and view, the closest, by optimal assignment; ByteTrack's second
+   association, made across views). On day 4 of the twin, 32 of the 35 annotated boxes that no confident box
+   covers are covered by an unsure one (IoU >= 0.5, scores 0.17-0.49): a person half hidden behind another is
+   still seen, just not confidently.
+6. **A box that disagrees with the rest of its person** (``outlier_mm``): in a person of three or more boxes,
+   each box's single-view skeleton is compared with the person fused from its other boxes; the box farthest
+   from it is dropped when that median joint distance exceeds ``outlier_mm``. Such a box holds half of the
+   person, or two persons, or another person who was grouped in by mistake, and its heatmaps would pull the
+   fused joints (on day 4 of the twin, 12 three-view persons with a box at IoU < 0.5 cost +5 cm each).
 
 The skeletons are lifted from the heatmaps that the pose network computes anyway; the grouped boxes are then fused
 from those same heatmaps (``BoxHeatmaps.estimate``), so the U-Net runs once per box in either matcher.
@@ -33,6 +45,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from scipy.sparse.csgraph import connected_components
 
 from detector.matching import (
@@ -44,10 +57,16 @@ from detector.matching import (
     combination_bound,
     combinations_within,
 )
+from posenet.boxes import iou_xyxy
 from posenet.cameras import Camera
 from posenet.scene import SceneView
 
 MATCHERS = ("centres", "skeletons")
+# Detected boxes scored from this up to the detector's threshold are unsure: they may complete a person seen
+# in other views (step 5), never start one. 32 of the 35 annotated boxes of the twin's day 4 that no sure box
+# covers are covered by a box scored 0.17-0.49; 0.25 keeps most of them and about 1.5 unsure boxes per view
+# that overlap no sure one.
+CANDIDATE_SCORE = 0.25
 
 
 @dataclass
@@ -72,6 +91,12 @@ class SkeletonMatchConfig:
     # (random look), 75.0 -> 75.0 % (twin look), 63.5 -> 63.5 % (sequence), merged 4.6 -> 2.3 % on the random
     # look; 400-500 split more, 800 merges more on the random look (docs/detector.md).
     link_reward_mm: float | None = 600.0
+    # A box below the detector's threshold joins a person (step 5) when its single-view skeleton lies within
+    # this median joint distance of the person's fused skeleton. None: unsure boxes are never used.
+    candidate_mm: float | None = 300.0
+    # Step 6: a box of a person of >= 3 boxes whose single-view skeleton lies farther than this (median joint
+    # distance) from the person fused from its other boxes is dropped from it. None: never.
+    outlier_mm: float | None = 300.0
 
     def __post_init__(self) -> None:
         if self.member_bonus_mm is not None and self.link_reward_mm is not None:
@@ -219,19 +244,143 @@ def view_members(group: Group) -> list[tuple[int, ...]]:
     return [tuple(m) for m in out]
 
 
+def split_unsure(
+    boxes: Sequence[np.ndarray], scores: Sequence[np.ndarray], threshold: float, duplicate_iou: float = 0.7
+) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray]]:
+    """Mark each view's boxes scored below ``threshold`` as unsure (the ``candidate`` of :func:`match_heatmaps`),
+    leaving out unsure boxes that overlap a sure box of their view by IoU >= ``duplicate_iou`` (the same person
+    found twice: the U-Net need not read it).
+
+    Returns per view the boxes ``(K_v, 4)``, their scores ``(K_v,)`` and the unsure mask ``(K_v,)``, in order."""
+    out_boxes, out_scores, candidate = [], [], []
+    for b, s in zip(boxes, scores, strict=True):
+        b, s = np.asarray(b).reshape(-1, 4), np.asarray(s).reshape(-1)
+        unsure = s < threshold
+        keep = np.ones(len(s), bool)
+        if unsure.any() and (~unsure).any():
+            keep[unsure] = iou_xyxy(b[unsure], b[~unsure]).max(1) < duplicate_iou
+        out_boxes.append(b[keep])
+        out_scores.append(s[keep])
+        candidate.append(unsure[keep])
+    return out_boxes, out_scores, candidate
+
+
 def match_heatmaps(
     heat,
     views: Sequence[SceneView],
     boxes: Sequence[np.ndarray],
     config: SkeletonMatchConfig | None = None,
     max_combinations: float | None = None,
+    candidate: Sequence[np.ndarray] | None = None,
 ) -> list[Group]:
     """Lift each box of ``heat`` (a ``posenet.box_poses.BoxHeatmaps`` of ``boxes``) alone and group the boxes.
 
-    Fuse the groups from the same heatmaps with ``heat.estimate(members_of(groups, boxes))``."""
+    ``candidate``: per view ``(K_v,)`` bool, the boxes the detector was unsure of (below its threshold): they
+    are left out of the grouping and may then complete persons (step 5 of the module docstring); those that
+    do not stay in no group. Fuse the groups from the same heatmaps with
+    ``heat.estimate(members_of(groups, boxes))``."""
+    config = config or SkeletonMatchConfig()
     alone = heat.single_view()
     joints = alone.joints.float().cpu().numpy()  # (N, J, 3)
     ok = np.isfinite(joints).all(-1) & alone.has_points.cpu().numpy()[:, None]  # (N, J)
-    return match_skeletons(
-        boxes, [v.depth for v in views], [v.camera for v in views], joints, ok, config, max_combinations
-    )
+    depths, cameras = [v.depth for v in views], [v.camera for v in views]
+    if candidate is None or not any(np.any(c) for c in candidate):
+        groups = match_skeletons(boxes, depths, cameras, joints, ok, config, max_combinations)
+        return drop_outliers(heat, groups, boxes, joints, ok, config.outlier_mm)
+    sure = [~np.asarray(c, bool).reshape(-1) for c in candidate]
+    flat = np.concatenate(sure)
+    groups = match_skeletons([np.asarray(b).reshape(-1, 4)[k] for b, k in zip(boxes, sure, strict=True)],
+                             depths, cameras, joints[flat], ok[flat], config, max_combinations)  # fmt: skip
+    index = [np.flatnonzero(k) for k in sure]  # a confident box's index in its view's full list
+    groups = [
+        Group(tuple(int(index[v][k]) if k >= 0 else -1 for v, k in enumerate(g.indices)), g.centre,
+              g.mean_distance, tuple((v, int(index[v][k])) for v, k in g.extra))
+        for g in groups
+    ]  # fmt: skip
+    if config.candidate_mm is not None and groups:
+        groups = admit_candidates(heat, groups, boxes, candidate, joints, ok, config.candidate_mm)
+    return drop_outliers(heat, groups, boxes, joints, ok, config.outlier_mm)
+
+
+def drop_outliers(
+    heat, groups: list[Group], boxes: Sequence[np.ndarray], joints: np.ndarray, ok: np.ndarray,
+    within_mm: float | None, min_boxes: int = 3,
+) -> list[Group]:  # fmt: skip
+    """Drop from each person of ``min_boxes`` or more boxes the one whose single-view skeleton lies farthest
+    from the fusion of the others, when farther than ``within_mm`` (step 6 of the module docstring).
+
+    Args: as :func:`admit_candidates`; ``within_mm`` None returns ``groups`` unchanged."""
+    if within_mm is None or not groups:
+        return groups
+    members = members_of(groups, boxes)  # (P, S)
+    size = (members >= 0).sum(1)
+    rows, owner = [], []
+    for p in np.flatnonzero(size >= min_boxes):
+        m = members[p][members[p] >= 0]
+        for k in range(len(m)):
+            rows.append(np.concatenate([np.delete(m, k), np.full(members.shape[1] - len(m) + 1, -1)]))
+            owner.append((p, int(m[k])))
+    if not rows:
+        return groups
+    others = heat.estimate(np.stack(rows))  # (R, J, 3): each box's person without it
+    rest = others.joints.float().cpu().numpy()
+    rest_ok = np.isfinite(rest).all(-1) & others.has_points.cpu().numpy()[:, None]
+    b = np.array([n for _, n in owner])
+    d = np.linalg.norm(rest - joints[b], axis=-1)  # (R, J)
+    d[~(rest_ok & ok[b])] = np.nan
+    dist = np.nan_to_num(_valid_median(d), nan=-np.inf)  # (R,)
+    starts = np.concatenate([[0], np.cumsum([len(np.asarray(x).reshape(-1, 4)) for x in boxes])])
+    drop = {}
+    for r, (p, n) in enumerate(owner):
+        if dist[r] > within_mm and dist[r] > drop.get(p, (None, -np.inf))[1]:
+            drop[p] = (n, dist[r])
+    out = list(groups)
+    for p, (n, _) in drop.items():
+        v = int(np.searchsorted(starts, n, side="right") - 1)
+        k = int(n - starts[v])
+        g = groups[p]
+        indices, extra = list(g.indices), [e for e in g.extra if e != (v, k)]
+        if indices[v] == k:  # the view's box: another box of that view, if any, takes its place
+            promoted = next((e for e in extra if e[0] == v), None)
+            indices[v] = -1 if promoted is None else promoted[1]
+            extra = [e for e in extra if e != promoted]
+        out[p] = Group(tuple(indices), g.centre, g.mean_distance, tuple(extra))
+    return out
+
+
+def admit_candidates(
+    heat,
+    groups: list[Group],
+    boxes: Sequence[np.ndarray],
+    candidate: Sequence[np.ndarray],
+    joints: np.ndarray,
+    ok: np.ndarray,
+    within_mm: float,
+) -> list[Group]:
+    """Give each person a view it lacks from the unsure boxes there (step 5 of the module docstring).
+
+    Args:
+        heat: the ``BoxHeatmaps`` of all ``boxes``; groups: persons of the confident boxes (full indices);
+        candidate: per view (K_v,) bool; joints, ok: (N, J, 3) / (N, J) every box's single-view skeleton.
+    """
+    fused = heat.estimate(members_of(groups, boxes))
+    person = fused.joints.float().cpu().numpy()  # (P, J, 3)
+    person_ok = np.isfinite(person).all(-1) & fused.has_points.cpu().numpy()[:, None]  # (P, J)
+    starts = np.concatenate([[0], np.cumsum([len(np.asarray(b).reshape(-1, 4)) for b in boxes])])
+    indices = [list(g.indices) for g in groups]
+    for v, cand in enumerate(candidate):
+        ks = np.flatnonzero(np.asarray(cand, bool).reshape(-1))
+        ps = [p for p, ind in enumerate(indices) if ind[v] < 0]
+        if not len(ks) or not ps:
+            continue
+        n = starts[v] + ks  # box numbers
+        d = np.linalg.norm(person[ps][:, None] - joints[n][None], axis=-1)  # (P', K', J)
+        d[~(person_ok[ps][:, None] & ok[n][None])] = np.nan
+        cost = _valid_median(d.reshape(-1, d.shape[-1])).reshape(len(ps), len(ks))
+        cost = np.where(np.nan_to_num(cost, nan=np.inf) <= within_mm, cost, 1e9)
+        for r, c in zip(*linear_sum_assignment(cost), strict=True):
+            if cost[r, c] < 1e9:
+                indices[ps[r]][v] = int(ks[c])
+    return [
+        Group(tuple(ind), g.centre, g.mean_distance, g.extra) for ind, g in zip(indices, groups, strict=True)
+    ]

@@ -18,12 +18,19 @@ Usage::
 
 With flip averaging (``ModelConfig.flip_test``) both passes are kept and every estimate is the mean of the two,
 as ``posenet.model.average_flips`` does.
+
+**Any grouping at the cost of a few sums.** The paper's joint is a softmax over the points of all the person's
+boxes. A softmax over a union of clouds is the softmax over each cloud, weighted by the softmax of the clouds'
+log-sum-exps; its mean is the weighted mean of the clouds' means, and its spread follows from the clouds' spreads
+and means (the law of total variance). So each box's cloud is reduced once, per joint, to its log-sum-exp, mean
+and variance (``BoxPass.moments``), and every estimate afterwards (each box alone, each person, each person
+without one of its boxes) combines a handful of those: no softmax over 9,216 points per box is repeated.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -48,6 +55,32 @@ class BoxPass:
     depth: Tensor
     valid: Tensor
     points: Tensor | None = None
+    _moments: tuple[Tensor, Tensor, Tensor] | None = field(default=None, repr=False)
+
+    def moments(self, eps: float) -> tuple[Tensor, Tensor, Tensor]:
+        """Per box and joint the softmax cloud's log-sum-exp (N, J), mean (N, J, 3) mm and variance (N, J) mm^2
+        (float64), over the box's points with invalid ones at logit ``eps``, as ``lifting.aggregate``."""
+        if self._moments is None:
+            with torch.inference_mode():
+                logits = self.logits[:, None].float()  # (N, 1, J, M)
+                z = lifting.masked_logits(logits, self.valid[:, None], eps)[:, 0]  # (N, J, M)
+                weights = torch.softmax(z, dim=-1)
+                # the log-sum-exp from the softmax at its largest logit: lse = z_max - log(w_max)
+                lse = z.amax(-1, keepdim=True) - weights.amax(-1, keepdim=True).log()  # (N, J, 1)
+                points = self.points.float()  # (N, M, 3)
+                # centred on each box's valid points (metre-sized numbers in float32, as aggregate does)
+                w_valid = self.valid.unsqueeze(-1).float()
+                centre = (points * w_valid).sum(1) / w_valid.sum(1).clamp_min(1)  # (N, 3)
+                q = points - centre.unsqueeze(1)
+                first = weights @ q  # (N, J, 3)
+                second = (weights @ (q * q).sum(-1, keepdim=True)).squeeze(-1)  # (N, J)
+                var = (second - (first * first).sum(-1)).clamp_min(0)
+                self._moments = (
+                    lse.squeeze(-1).double(),
+                    (first + centre.unsqueeze(1)).double(),
+                    var.double(),
+                )
+        return self._moments
 
 
 @dataclass
@@ -122,15 +155,26 @@ class BoxHeatmaps:
         outs = []
         with torch.inference_mode():
             for p in self.passes:
+                if p.points is not None:  # the 3D aggregation, from each box's cloud moments
+                    outs.append(self._combine(p, slot, used))
+                    continue
                 valid = take(p.valid) & used.unsqueeze(-1)  # (P, S, M)
-                if p.points is not None:  # the 3D aggregation, from the points lifted once per box
-                    outs.append(lifting.aggregate(take(p.logits), take(p.points), valid, self.eps))
-                else:
-                    outs.append(self.estimate_fn(take(p.logits), take(p.uv), take(p.depth), valid, cams))
+                outs.append(self.estimate_fn(take(p.logits), take(p.uv), take(p.depth), valid, cams))
         joints = torch.stack([o.joints for o in outs]).mean(0)
         confidence = torch.stack([o.confidence for o in outs]).mean(0)
         has_points = torch.stack([o.has_points for o in outs]).all(0)
         return JointEstimate(joints, confidence, has_points)
+
+    def _combine(self, p: BoxPass, slot: Tensor, used: Tensor) -> JointEstimate:
+        """``lifting.aggregate`` over each person's boxes ``slot (P, S)`` (``used``), from the boxes' moments."""
+        lse, mean, var = p.moments(self.eps)
+        logw = lse[slot].masked_fill(~used.unsqueeze(-1), -torch.inf)  # (P, S, J)
+        w = torch.softmax(logw, dim=1).nan_to_num(0.0)  # a person without boxes: all weights 0
+        mu = mean[slot]  # (P, S, J, 3)
+        joints = (w.unsqueeze(-1) * mu).sum(1)  # (P, J, 3)
+        spread = (w * (var[slot] + ((mu - joints.unsqueeze(1)) ** 2).sum(-1))).sum(1)  # (P, J)
+        has_points = (p.valid.any(-1)[slot] & used).any(1)
+        return JointEstimate(joints.float(), (spread + 1e-6).sqrt().float(), has_points)
 
     def single_view(self) -> JointEstimate:
         """Each box lifted alone: joints (N, J, 3), confidence (N, J), has_points (N,)."""

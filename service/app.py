@@ -38,7 +38,11 @@ async def lifespan(app: FastAPI):
                 settings.detector_checkpoint,
                 settings.device,
                 settings.load_detector,
-                PipelineConfig(max_pose_pixels=settings.max_pose_pixels, matcher=settings.matcher),
+                PipelineConfig(
+                    max_pose_pixels=settings.max_pose_pixels,
+                    matcher=settings.matcher,
+                    candidate_score=settings.candidate_score,
+                ),
                 settings.precision,
                 settings.backend,
                 settings.threads,

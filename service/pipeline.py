@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig
 from posenet.boxes import ground_truth_ids, hull, identified
 from posenet.data.sample import Sample
 from posenet.evaluate import prediction_record
@@ -49,10 +50,18 @@ class PipelineConfig:
     # "skeletons-greedy" groups the same skeletons by the paper's greedy rule instead of one optimal partition
     # per frame (detector.matching.choose_optimally), for the ablation.
     matcher: str = "skeletons"
+    # Detector mode with the skeleton matcher: boxes scored from this up to the detector's threshold may complete
+    # a person seen confidently in other views (detector.skeleton_matching, step 5); they never start one.
+    # None: only the detector's confident boxes are used.
+    candidate_score: float | None = CANDIDATE_SCORE
+    # The skeleton matcher's thresholds (None: its defaults, with the greedy rule for "skeletons-greedy").
+    skeleton_match: SkeletonMatchConfig | None = None
 
     def __post_init__(self) -> None:
         if self.matcher not in ("centres", "skeletons", "skeletons-greedy"):
-            raise ValueError(f"matcher must be 'centres', 'skeletons' or 'skeletons-greedy', got {self.matcher!r}")
+            raise ValueError(
+                f"matcher must be 'centres', 'skeletons' or 'skeletons-greedy', got {self.matcher!r}"
+            )
 
 
 @dataclass
@@ -246,28 +255,32 @@ class ScenePipeline:
             raise ValueError("a scene needs at least one view")
         timings = {"detect": 0.0, "match": 0.0, "pose": 0.0}
         scores: list[np.ndarray | None] = [None] * len(views)
+        candidate = None  # per view (K_v,) bool: detected boxes below the detector's threshold
         if boxes is None:
             if self.detector is None:
                 raise ValueError("no detector is loaded: give reference boxes")
             t0 = time.perf_counter()
-            detections = self.detector.detect([v.color for v in views], depths=[v.depth for v in views])
+            boxes, scores, candidate = self._detect(views)
             timings["detect"] = _ms(t0)
-            boxes = [np.asarray(d.boxes, np.float32).reshape(-1, 4) for d in detections]  # (K_v, 4) each
-            scores = [np.asarray(d.scores, np.float32).reshape(-1) for d in detections]  # (K_v,) each
             person_ids = None
         elif len(boxes) != len(views):
             raise ValueError(f"boxes has {len(boxes)} entries for {len(views)} views")
         t0 = time.perf_counter()
         limit, why = self._person_limit(len(views))
         heat, members = None, None
+        if candidate is None or not any(c.any() for c in candidate):
+            candidate = None
         if person_ids is not None:
             ids, groups = group_by_ids(person_ids)
         elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
-            boxes, scores = self._fit_boxes(boxes, scores, limit, why)
-            heat, timings["match"], groups, members = self._match_skeletons(boxes, views)
+            boxes, scores, candidate = self._fit_boxes(boxes, scores, limit, why, candidate)
+            heat, timings["match"], groups, members = self._match_skeletons(boxes, views, candidate)
             timings["pose"] += _ms(t0) - timings["match"]
             ids = list(range(len(groups)))
         elif any(len(b) for b in boxes):
+            if candidate is not None:  # the centre matcher reads confident boxes only
+                boxes = [b[~c] for b, c in zip(boxes, candidate, strict=True)]
+                scores = [s[~c] for s, c in zip(scores, candidate, strict=True)]
             groups = self._match(boxes, views)
             ids = list(range(len(groups)))
         else:
@@ -318,28 +331,61 @@ class ScenePipeline:
              for v, ks in enumerate(members)],
         )  # fmt: skip
 
-    def _fit_boxes(self, boxes, scores, limit: int, why: str) -> tuple[list, list]:
+    def _fit_boxes(
+        self, boxes, scores, limit: int, why: str, candidate=None
+    ) -> tuple[list, list, list | None]:
         """The skeleton matcher runs the U-Net on every box, laid out as max_v K_v persons: keep that within the
         person limit (detector mode: each view's best-scored boxes; reference boxes: refuse)."""
         if max(len(b) for b in boxes) <= limit:
-            return boxes, scores
+            return boxes, scores, candidate
         if scores[0] is None:
             raise ValueError(f"a view holds {max(len(b) for b in boxes)} boxes, more persons than {why}")
         keep = [np.sort(np.argsort(-s, kind="stable")[:limit]) for s in scores]
         boxes = [b[k] for b, k in zip(boxes, keep, strict=True)]
-        return boxes, [s[k] for s, k in zip(scores, keep, strict=True)]
+        if candidate is not None:
+            candidate = [c[k] for c, k in zip(candidate, keep, strict=True)]
+        return boxes, [s[k] for s, k in zip(scores, keep, strict=True)], candidate
 
-    def _match_skeletons(self, boxes: list[np.ndarray], views: list[SceneView]):
+    def _detect(self, views: list[SceneView]) -> tuple[list, list, list | None]:
+        """The detector's boxes ``(K_v, 4)`` and scores ``(K_v,)`` per view, and which of them are unsure
+        (``PipelineConfig.candidate_score`` up to the detector's threshold; None when unsure ones are not used;
+        ``detector.skeleton_matching.split_unsure``)."""
+        threshold = self.detector.cfg.score_threshold
+        low = self.config.candidate_score
+        use_low = self.config.matcher.startswith("skeletons") and low is not None and low < threshold
+        detections = self.detector.detect(
+            [v.color for v in views],
+            depths=[v.depth for v in views],
+            score_threshold=low if use_low else None,
+        )
+        boxes = [np.asarray(d.boxes, np.float32).reshape(-1, 4) for d in detections]  # (K_v, 4) each
+        scores = [np.asarray(d.scores, np.float32).reshape(-1) for d in detections]  # (K_v,) each
+        if not use_low:
+            return boxes, scores, None
+        from detector.skeleton_matching import split_unsure
+
+        return split_unsure(boxes, scores, threshold)
+
+    def _match_skeletons(self, boxes: list[np.ndarray], views: list[SceneView], candidate=None):
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
         Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds spent after
         the U-Net, per person and view the indices of its boxes there, and their ``(P, S)`` box numbers."""
-        from detector.skeleton_matching import SkeletonMatchConfig, match_heatmaps, members_of, view_members
+        from detector.skeleton_matching import match_heatmaps, members_of, view_members
 
         heat = self.pose.box_heatmaps(list(views), boxes)
         t0 = time.perf_counter()
-        config = SkeletonMatchConfig(link_reward_mm=None) if self.config.matcher == "skeletons-greedy" else None
-        groups = match_heatmaps(heat, views, boxes, config, max_combinations=self.config.max_match_combinations)
+        config = self.config.skeleton_match
+        if config is None and self.config.matcher == "skeletons-greedy":
+            config = SkeletonMatchConfig(link_reward_mm=None)
+        groups = match_heatmaps(
+            heat,
+            views,
+            boxes,
+            config,
+            max_combinations=self.config.max_match_combinations,
+            candidate=candidate,
+        )
         return heat, _ms(t0), [view_members(g) for g in groups], members_of(groups, boxes)
 
     # ----------------------------------------------------------------------------------------- offline

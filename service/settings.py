@@ -12,6 +12,7 @@ from typing import Literal
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from detector.skeleton_matching import CANDIDATE_SCORE
 from posenet.track import TrackerConfig
 
 
@@ -69,6 +70,15 @@ class Settings(BaseSettings):
         description="how boxes without person_ids are grouped across views: centres (the paper's 3D box "
         "centres, 75 cm), skeletons (each box's single-view 3D skeleton, one optimal partition per frame) or "
         "skeletons-greedy (the same skeletons, the paper's greedy rule)",
+    )
+    # detector.skeleton_matching, step 5: boxes the detector was unsure of may complete a person seen in other
+    # views (never start one). 1 (or any value at or above the detector's threshold) uses sure boxes only.
+    candidate_score: float = Field(
+        CANDIDATE_SCORE,
+        ge=0,
+        le=1,
+        description="detector mode, skeleton matcher: boxes scored from this up to the detector's threshold "
+        "may complete a person seen in other views (1: only the detector's sure boxes)",
     )
     retry_after_s: int = Field(1, ge=1, le=3600, description="Retry-After seconds sent with a 503")
     # 3 views of 640x480 PNG colour + depth are about 2-3 MB; 64 MiB leaves room for 8 large views.

@@ -295,6 +295,11 @@ def test_association_counts_found_split_merged():
     b2, ids2 = [b.astype(np.float64) for b, _, _ in seen], [i for _, _, i in seen]
     out = frame_association(b2, ids2, b2, [Group((0, 0, 0), c, 0.0)])
     assert (out["merged"], out["found"], out["split"]) == (2, 0, 0)
+    # A box in no group (an unsure box that completed nobody) is not a detection: person 1's box in view 2 is
+    # left out of every group, so person 1 is found but not complete, not split.
+    unowned = [Group((0, 0, 0), c, 0.0), Group((1, 1, -1), c, 0.0)]
+    out = frame_association(boxes, ids, boxes, unowned)
+    assert (out["found"], out["complete"], out["split"]) == (2, 1, 0)
     # Nothing detected -> both missed; the paper's score is 0.
     empty = [np.zeros((0, 4))] * 3
     out = frame_association(boxes, ids, empty, [])

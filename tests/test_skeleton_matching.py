@@ -287,3 +287,97 @@ def test_a_member_bonus_lets_a_close_pair_win_over_a_loose_triple():
     assert groups(200.0) == [[0, 1], [2]]
     chosen = choose_greedily(combos, 3, 200.0)
     assert chosen[0][1] == pytest.approx(100.0)  # the real mean distance, not the ranking key
+
+
+class MeanFusion:
+    """Fusion as the mean of the member boxes' skeletons: the grouping steps only call ``estimate``, and this
+    makes the fused skeleton of a test scene known exactly (the real fusion is tested above)."""
+
+    def __init__(self, joints: np.ndarray):
+        self.joints = torch.as_tensor(joints, dtype=torch.float32)
+
+    def estimate(self, members):
+        from posenet.lifting import JointEstimate
+
+        members = torch.as_tensor(np.asarray(members))
+        used = (members >= 0).float()[..., None, None]  # (P, S, 1, 1)
+        joints = (self.joints[members.clamp_min(0)] * used).sum(1) / used.sum(1).clamp_min(1)
+        return JointEstimate(joints, torch.zeros(joints.shape[:2]), (members >= 0).any(1))
+
+
+def _groups(*rows):
+    from detector.matching import Group
+
+    return [Group(tuple(r), np.zeros(3), 0.0) for r in rows]
+
+
+def test_unsure_boxes_complete_persons_but_never_start_one():
+    from detector.skeleton_matching import admit_candidates
+
+    rng = np.random.default_rng(0)
+    A, B = TEMPLATE + [0, 0, 3000], TEMPLATE + [900, 0, 3200]
+    # view 0: A, B (sure); view 1: A (sure), an unsure box of B, an unsure box of nobody; view 2: an unsure
+    # box of A 20 cm off, an unsure box of B 50 cm off (too far)
+    skeletons = [A, B, A, B, TEMPLATE + [-2000, 0, 5000], A + [200, 0, 0], B + [0, 0, 500]]
+    joints = np.stack(skeletons) + rng.normal(0, 10, (7, 10, 3))
+    ok = np.ones((7, 10), bool)
+    boxes = [np.zeros((2, 4)), np.zeros((3, 4)), np.zeros((2, 4))]
+    candidate = [np.array([False, False]), np.array([False, True, True]), np.array([True, True])]
+    groups = admit_candidates(MeanFusion(joints), _groups((0, 0, -1), (1, -1, -1)), boxes, candidate, joints,
+                              ok, within_mm=300.0)  # fmt: skip
+    assert [g.indices for g in groups] == [(0, 0, 0), (1, 1, -1)]
+    # with no person lacking a view, or no unsure box, nothing changes
+    assert admit_candidates(MeanFusion(joints), _groups((0, 0, 0)), boxes, candidate, joints, ok, 300.0)[
+        0
+    ].indices == (0, 0, 0)
+
+
+def test_a_box_far_from_the_rest_of_its_person_is_dropped():
+    from detector.skeleton_matching import drop_outliers
+
+    A = TEMPLATE + [0, 0, 3000]
+    # a person of 4 boxes: views 0, 1, 2 and a second box in view 1 (a duplicate); view 2's box reads someone
+    # 80 cm away. Another person of two boxes that disagree (too few to tell which is wrong).
+    # box numbers in view order: view 0: 0, 1; view 1: 2, 3; view 2: 4, 5
+    joints = np.stack([A, A, A + [10, 0, 0], A + [0, 5, 0], A + [0, 0, 800], A + [0, 0, 900]])
+    ok = np.ones((6, 10), bool)
+    boxes = [np.zeros((2, 4)), np.zeros((2, 4)), np.zeros((2, 4))]
+    from detector.matching import Group
+
+    groups = [Group((0, 0, 0), np.zeros(3), 0.0, ((1, 1),)), Group((1, -1, 1), np.zeros(3), 0.0)]
+    out = drop_outliers(MeanFusion(joints), groups, boxes, joints, ok, within_mm=300.0)
+    assert out[0].indices == (0, 0, -1) and out[0].extra == ((1, 1),)
+    assert out[1] == groups[1]
+    assert drop_outliers(MeanFusion(joints), groups, boxes, joints, ok, within_mm=None) == groups
+    assert drop_outliers(MeanFusion(joints), groups, boxes, joints, ok, within_mm=1000.0) == groups
+    # the dropped box was the view's first: its other box takes its place
+    joints[4], joints[2] = A, A + [0, 0, 900]
+    out = drop_outliers(MeanFusion(joints), groups, boxes, joints, ok, within_mm=300.0)
+    assert out[0].indices == (0, 1, 0) and out[0].extra == ()
+
+
+def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny):
+    """Through the pipeline with a real (tiny, untrained) detector: every person holds at least one box the
+    detector was sure of, and without unsure boxes (candidate_score None) only sure boxes are used."""
+    from service_harness import tiny_checkpoints
+
+    from detector.infer import PersonDetector
+
+    _, path = tiny_checkpoints(tmp_path, detector=True)
+    det = PersonDetector.from_checkpoint(path)
+    est = estimator()
+    views, _ = frame(tiny[1][0])
+    scores = np.concatenate([d.scores for d in det.detect([v.color for v in views], score_threshold=0.0)])
+    det.cfg.score_threshold = threshold = float(np.quantile(scores, 0.97))  # a few sure boxes, many unsure
+    low = ScenePipeline(est, det, PipelineConfig(candidate_score=0.0))
+    sure = ScenePipeline(est, det, PipelineConfig(candidate_score=None))
+    boxes, scores, candidate = low._detect(views)
+    assert all(
+        (s[~c] >= threshold).all() and (s[c] < threshold).all()
+        for s, c in zip(scores, candidate, strict=True)
+    )
+    result = low.run(views)
+    for person in result.persons:
+        assert any(s is not None and s >= threshold for s in person.scores)
+    plain = sure.run(views)
+    assert all(s is None or s >= threshold for p in plain.persons for s in p.scores)

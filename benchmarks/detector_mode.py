@@ -1,0 +1,139 @@
+"""Detector mode against reference boxes, matcher variants side by side: MPJPE per support and the cost per stage.
+
+    python benchmarks/detector_mode.py --data data/mvor_twin --days 4
+    python benchmarks/detector_mode.py --data data/mvor_alt --days 4 --json runs/detector_mode_alt.json
+
+Runs the service's pipeline (``service.pipeline.ScenePipeline``, the shipped weights, the service's default
+backend) offline on every frame of ``--days``: once with the reference boxes and their ids (the paper's
+setting), and in detector mode once per variant of the skeleton matcher:
+
+- ``sure``: only boxes at or above the detector's threshold, every box kept in its person (before 2026-12-03);
+- ``+unsure``: boxes scored from ``PipelineConfig.candidate_score`` up may complete a person seen in other
+  views (``detector.skeleton_matching``, step 5);
+- ``+unsure+outliers`` (the default): and a box far from the rest of its person leaves it (step 6).
+
+The detector runs once per frame (at the lowest score any variant reads); the variants then run one after
+another on the same frame, so that a loaded machine slows them alike. Prints per variant the MVOR per-support
+average (shoulders, hips, elbows, wrists) at 1 / 2 / 3 views and the overall MPJPE (10 joints, cm;
+``posenet.evaluate``), the ratio to the reference boxes, and the median / p95 milliseconds of the matcher
+(``match``: lifting each box alone, grouping, fusing) and of the U-Net (``pose``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from detector.skeleton_matching import CANDIDATE_SCORE
+from posenet.boxes import ground_truth_ids
+from posenet.data.mvor import MvorDataset, image_day, load_annotations
+from posenet.evaluate import evaluate, prediction_record
+from posenet.execution import machine_line
+from posenet.scene import views_of
+from service.pipeline import PipelineConfig, ScenePipeline
+
+VARIANTS = {  # name: (candidate_score, outlier_mm)
+    "sure": (None, None),
+    "+unsure": (CANDIDATE_SCORE, None),
+    "+unsure+outliers": (CANDIDATE_SCORE, "default"),
+}
+
+
+class FrameDetections:
+    """The detector's boxes of one frame at the lowest score asked for, handed out at any higher score."""
+
+    def __init__(self, detector, views, lowest: float):
+        self.cfg = detector.cfg
+        self.found = detector.detect([v.color for v in views], depths=[v.depth for v in views],
+                                     score_threshold=lowest)  # fmt: skip
+
+    def detect(self, images, depths=None, score_threshold=None):
+        from detector.infer import Detections
+
+        keep = self.cfg.score_threshold if score_threshold is None else score_threshold
+        return [Detections(d.boxes[d.scores >= keep], d.scores[d.scores >= keep]) for d in self.found]
+
+
+def main(argv: list[str] | None = None) -> dict:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
+    p.add_argument("--data", type=Path, default=Path("data/mvor_twin"), help="MVOR-format dataset")
+    p.add_argument("--annotations", type=Path, help="its annotations (default: DATA/annotations.json)")
+    p.add_argument("--days", type=int, nargs="+", help="recording days (default: all)")
+    p.add_argument("--threads", type=int, default=2, help="runtime threads")
+    p.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
+    p.add_argument("--json", type=Path, help="also write the results here")
+    args = p.parse_args(argv)
+    gt = load_annotations(args.annotations or args.data / "annotations.json")
+    days = args.days or sorted({image_day(mv["images"][0]) for mv in gt["multiview_images"]})
+    ds = MvorDataset(args.data, gt, 1, ("color", "depth"), days=days)
+    pipe = ScenePipeline.from_checkpoints(backend="auto", threads=args.threads)
+    from detector.skeleton_matching import SkeletonMatchConfig
+
+    default_outlier = SkeletonMatchConfig().outlier_mm
+    lowest = min([pipe.detector.cfg.score_threshold] + [c for c, _ in VARIANTS.values() if c is not None])
+    pipes = {}
+    for name in args.variants:
+        candidate, outlier = VARIANTS[name]
+        match = SkeletonMatchConfig(outlier_mm=default_outlier if outlier else None)
+        config = replace(PipelineConfig(), candidate_score=candidate, skeleton_match=match)
+        pipes[name] = ScenePipeline(pipe.pose, pipe.detector, config)
+    preds = {"reference": [], **{n: [] for n in pipes}}
+    times = {n: {"match": [], "pose": []} for n in pipes}
+    for i in tqdm(range(len(ds)), desc="frames", unit="frame"):
+        sample = ds[i]
+        views = views_of(sample)
+        preds["reference"] += pipe.run_sample(sample, reference_boxes=True)[1]
+        frame = FrameDetections(pipe.detector, views, lowest)
+        for name, variant in pipes.items():
+            variant.detector = frame
+            result = variant.run(views)
+            ids = ground_truth_ids(sample, [q.boxes for q in result.persons])
+            preds[name] += [prediction_record(sample.id, pid, q.joints, q.spread_mm, q.confidence)
+                            for q, pid in zip(result.persons, ids, strict=True) if pid is not None]  # fmt: skip
+            for k in ("match", "pose"):
+                times[name][k].append(result.timings[k])
+    rows = {}
+    for name, pr in preds.items():
+        r = evaluate(gt, pr, days=days)
+        rows[name] = {
+            "support": {k: v.get("average") for k, v in r["per_support"].items()},
+            "poses": {k: v.get("count") for k, v in r["per_support"].items()},
+            "overall": r["overall"],
+        }
+        if name in times:
+            rows[name]["ms"] = {
+                k: [float(np.median(v)), float(np.percentile(v, 95))] for k, v in times[name].items()
+            }
+    ref = rows["reference"]["support"]
+    print(f"{args.data} days {days}; {machine_line()}")
+    print("| boxes | 1 view | 2 views | 3 views | overall | ratio to reference (1 / 2 / 3) | match ms (median / p95) | "
+          "pose ms |")  # fmt: skip
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for name, row in rows.items():
+        sup = [row["support"].get(k) for k in ("1", "2", "3")]
+        cells = " | ".join("-" if v is None else f"{v:.2f}" for v in sup)
+        ratio = " / ".join("-" if v is None or ref.get(k) is None else f"{v / ref[k]:.2f}"
+                           for v, k in zip(sup, ("1", "2", "3"), strict=True))  # fmt: skip
+        ms = row.get("ms")
+        timing = (
+            ""
+            if ms is None
+            else f"{ms['match'][0]:.1f} / {ms['match'][1]:.1f} | {ms['pose'][0]:.1f} / {ms['pose'][1]:.1f}"
+        )
+        print(
+            f"| {name} | {cells} | {row['overall']:.2f} | {ratio if name != 'reference' else ''} | {timing or ' | '} |"
+        )
+    out = {"data": str(args.data), "days": days, "machine": machine_line(), "rows": rows}
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=2))
+    return out
+
+
+if __name__ == "__main__":
+    main()
