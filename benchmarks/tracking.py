@@ -136,7 +136,11 @@ def main(argv: list[str] | None = None) -> dict:
         key, _, value = item.partition("=")
         if not hasattr(config, key):
             p.error(f"--set {item}: TrackerConfig has no field {key!r}")
-        setattr(config, key, type(getattr(config, key))(value))
+        current = getattr(config, key)
+        if value.lower() == "none":
+            setattr(config, key, None)
+        else:  # a field that is None by default takes a number
+            setattr(config, key, float(value) if current is None else type(current)(value))
     report = {"machine": machine_line(), "date": time.strftime("%Y-%m-%d"), "tracker": vars(config).copy()}
     report["sequences"] = {}
     if args.served:

@@ -176,7 +176,15 @@ def evaluate_association(
             views = views_of(sample)
             heat = pose.box_heatmaps(views, pred)
             groupings = [
-                match_heatmaps(heat, views, pred, c, max_combinations=PAIRS_LIMIT, candidate=candidate)
+                match_heatmaps(
+                    heat,
+                    views,
+                    pred,
+                    c,
+                    max_combinations=PAIRS_LIMIT,
+                    candidate=candidate,
+                    detected=detected is not None,
+                )  # fmt: skip
                 for c in configs
             ]
         else:

@@ -274,7 +274,9 @@ class ScenePipeline:
             ids, groups = group_by_ids(person_ids)
         elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
             boxes, scores, candidate = self._fit_boxes(boxes, scores, limit, why, candidate)
-            heat, timings["match"], groups, members = self._match_skeletons(boxes, views, candidate)
+            heat, timings["match"], groups, members = self._match_skeletons(
+                boxes, views, candidate, detected=scores[0] is not None
+            )
             timings["pose"] += _ms(t0) - timings["match"]
             ids = list(range(len(groups)))
         elif any(len(b) for b in boxes):
@@ -366,7 +368,9 @@ class ScenePipeline:
 
         return split_unsure(boxes, scores, threshold)
 
-    def _match_skeletons(self, boxes: list[np.ndarray], views: list[SceneView], candidate=None):
+    def _match_skeletons(
+        self, boxes: list[np.ndarray], views: list[SceneView], candidate=None, detected: bool = False
+    ):
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
         Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds spent after
@@ -385,6 +389,7 @@ class ScenePipeline:
             config,
             max_combinations=self.config.max_match_combinations,
             candidate=candidate,
+            detected=detected,
         )
         return heat, _ms(t0), [view_members(g) for g in groups], members_of(groups, boxes)
 

@@ -188,6 +188,9 @@ def test_pipeline_with_the_skeleton_matcher(tiny):
     views, boxes = frame(sample)
     result = pipe.run(views, boxes)
     assert result.persons and set(result.timings) == {"detect", "match", "pose"}
+    # boxes a user sent are never dropped (the outlier rule is for detected boxes): each is in one person
+    held = sorted((v, k) for p in result.persons for v, ks in enumerate(p.box_indices) for k in ks)
+    assert held == [(v, k) for v, b in enumerate(boxes) for k in range(len(b))]
     assert sum(len(p.support) for p in result.persons) <= sum(len(b) for b in boxes)
     single = 0
     for person in result.persons:
