@@ -70,6 +70,28 @@ def _depth_samples(boxes: np.ndarray, depth: np.ndarray, central_fraction: float
     return samples
 
 
+def components(link: np.ndarray) -> np.ndarray:
+    """``(N,)`` connected-component label of each node of a symmetric boolean adjacency ``(N, N)``, numbered in
+    the order of each component's first node (as scipy's ``connected_components``).
+
+    Dense, by squaring the reachability matrix: a frame has tens of boxes, where scipy's conversion to a sparse
+    graph costs more than the search (0.21 against 0.05 ms for 15 nodes on a 2-core AMD EPYC)."""
+    link = np.asarray(link, bool)
+    n = len(link)
+    if n == 0:
+        return np.zeros(0, np.int64)
+    if n > 256:  # beyond a frame's size: the sparse search
+        return connected_components(link, directed=False)[1]
+    reach = (link | link.T | np.eye(n, dtype=bool)).astype(np.float32)
+    while True:
+        grown = (reach @ reach > 0).astype(np.float32)
+        if np.array_equal(grown, reach):
+            break
+        reach = grown
+    _, labels = np.unique(reach.argmax(1), return_inverse=True)  # each node's smallest reachable node
+    return labels.reshape(-1)
+
+
 def _valid_median(samples: np.ndarray) -> np.ndarray:
     """Row medians ``(K,)`` of ``samples (K, S)`` ignoring NaN (NaN for an all-NaN row).
 
@@ -250,7 +272,7 @@ def choose_optimally(
         cols = np.repeat(np.arange(len(useful)), sizes[useful])
         link = np.zeros((n, len(useful)), np.int32)
         link[rows, cols] = 1
-        _, label = connected_components(link @ link.T > 0, directed=False)  # items sharing a combination
+        label = components(link @ link.T > 0)  # items sharing a combination
         comp_of = label[[members[c][0] for c in useful]]  # (len(useful),) each combination's component
         for comp in np.unique(comp_of):
             in_comp = [int(c) for c in useful[comp_of == comp]]

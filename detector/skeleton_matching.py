@@ -46,7 +46,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.sparse.csgraph import connected_components
 
 from detector.matching import (
     Group,
@@ -56,6 +55,7 @@ from detector.matching import (
     choose_optimally,
     combination_bound,
     combinations_within,
+    components,
 )
 from posenet.boxes import iou_xyxy
 from posenet.cameras import Camera
@@ -124,7 +124,7 @@ def skeleton_distances(joints: np.ndarray, ok: np.ndarray) -> np.ndarray:
 def _units(dist: np.ndarray, view: np.ndarray, same_view_mm: float) -> np.ndarray:
     """(N,) unit label of each box: boxes of one view linked by skeletons within ``same_view_mm``."""
     link = (np.nan_to_num(dist, nan=np.inf) <= same_view_mm) & (view[:, None] == view[None, :])
-    _, labels = connected_components(link, directed=False)
+    labels = components(link)
     # Number the units by their first box, so that the boxes' order (view order) is kept.
     _, first = np.unique(labels, return_index=True)
     order = np.argsort(np.argsort(first))

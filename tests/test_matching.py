@@ -304,3 +304,17 @@ def test_association_counts_found_split_merged():
     empty = [np.zeros((0, 4))] * 3
     out = frame_association(boxes, ids, empty, [])
     assert out["missed"] == 2 and out["iou_sum"] == 0.0
+
+
+def test_dense_components_equal_scipy():
+    from scipy.sparse.csgraph import connected_components
+
+    from detector.matching import components
+
+    rng = np.random.default_rng(0)
+    for n in (0, 1, 2, 7, 30, 300):  # 300: beyond a frame, the sparse search itself
+        for density in (0.0, 0.05, 0.3):
+            a = rng.random((n, n)) < density
+            a |= a.T
+            expected = connected_components(a, directed=False)[1] if n else np.zeros(0)
+            np.testing.assert_array_equal(components(a), expected)
