@@ -55,11 +55,12 @@ class BoxPass:
     depth: Tensor
     valid: Tensor
     points: Tensor | None = None
-    _moments: tuple[Tensor, Tensor, Tensor] | None = field(default=None, repr=False)
+    _moments: tuple[Tensor, Tensor, Tensor, Tensor] | None = field(default=None, repr=False)
 
-    def moments(self, eps: float) -> tuple[Tensor, Tensor, Tensor]:
+    def moments(self, eps: float) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """Per box and joint the softmax cloud's log-sum-exp (N, J), mean (N, J, 3) mm and variance (N, J) mm^2
-        (float64), over the box's points with invalid ones at logit ``eps``, as ``lifting.aggregate``."""
+        (float64), over the box's points with invalid ones at logit ``eps``, as ``lifting.aggregate``; and per
+        box whether it has a valid point at all (N,)."""
         if self._moments is None:
             with torch.inference_mode():
                 logits = self.logits[:, None].float()  # (N, 1, J, M)
@@ -79,6 +80,7 @@ class BoxPass:
                     lse.squeeze(-1).double(),
                     (first + centre.unsqueeze(1)).double(),
                     var.double(),
+                    self.valid.any(-1),
                 )
         return self._moments
 
@@ -167,13 +169,13 @@ class BoxHeatmaps:
 
     def _combine(self, p: BoxPass, slot: Tensor, used: Tensor) -> JointEstimate:
         """``lifting.aggregate`` over each person's boxes ``slot (P, S)`` (``used``), from the boxes' moments."""
-        lse, mean, var = p.moments(self.eps)
+        lse, mean, var, has = p.moments(self.eps)
         logw = lse[slot].masked_fill(~used.unsqueeze(-1), -torch.inf)  # (P, S, J)
         w = torch.softmax(logw, dim=1).nan_to_num(0.0)  # a person without boxes: all weights 0
         mu = mean[slot]  # (P, S, J, 3)
         joints = (w.unsqueeze(-1) * mu).sum(1)  # (P, J, 3)
         spread = (w * (var[slot] + ((mu - joints.unsqueeze(1)) ** 2).sum(-1))).sum(1)  # (P, J)
-        has_points = (p.valid.any(-1)[slot] & used).any(1)
+        has_points = (has[slot] & used).any(1)
         return JointEstimate(joints.float(), (spread + 1e-6).sqrt().float(), has_points)
 
     def single_view(self) -> JointEstimate:
