@@ -384,3 +384,31 @@ def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny
         assert any(s is not None and s >= threshold for s in person.scores)
     plain = sure.run(views)
     assert all(s is None or s >= threshold for p in plain.persons for s in p.scores)
+
+
+def test_association_reads_unsure_detections_as_the_service_does(tiny):
+    """COCO results with scores: below --score-threshold and without candidate_score they are left out (the
+    same counts as a file without them); with it they may only complete persons (the counts still add up, and
+    no person is found that was missed before: unsure boxes never start one)."""
+    from posenet.boxes import xyxy_to_coco
+
+    est = estimator()
+    sure, unsure = [], []
+    for sample in tiny[1]:
+        for view in sample.views:
+            for box in np.asarray(view.boxes, np.float64).reshape(-1, 4):
+                record = {
+                    "image_id": int(view.image_id),
+                    "category_id": 1,
+                    "bbox": xyxy_to_coco(box).tolist(),
+                }
+                sure.append({**record, "score": 0.9})
+                shifted = xyxy_to_coco(box + [40, 0, 40, 0]).tolist()  # a poorer box beside it, less sure
+                unsure.append({**record, "bbox": shifted, "score": 0.3})
+    kwargs = {"matcher": "skeletons", "pose": est, "progress": False, "score_threshold": 0.5}
+    alone = evaluate_association(tiny[1], sure, **kwargs)
+    ignored = evaluate_association(tiny[1], sure + unsure, candidate_score=None, **kwargs)
+    assert ignored == alone
+    used = evaluate_association(tiny[1], sure + unsure, candidate_score=0.25, **kwargs)
+    assert used["found"] + used["split"] + used["merged"] + used["missed"] == used["persons"]
+    assert used["missed"] <= alone["missed"]
