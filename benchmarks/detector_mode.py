@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from detector.skeleton_matching import CANDIDATE_SCORE
+from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig
 from posenet.boxes import ground_truth_ids
 from posenet.data.mvor import MvorDataset, image_day, load_annotations
 from posenet.evaluate import evaluate, prediction_record
@@ -41,10 +41,10 @@ from posenet.execution import machine_line
 from posenet.scene import views_of
 from service.pipeline import PipelineConfig, ScenePipeline
 
-VARIANTS = {  # name: (candidate_score, outlier_mm)
-    "sure": (None, None),
-    "+unsure": (CANDIDATE_SCORE, None),
-    "+unsure+outliers": (CANDIDATE_SCORE, "default"),
+VARIANTS = {  # name: (candidate_score, the outlier rule at its default)
+    "sure": (None, False),
+    "+unsure": (CANDIDATE_SCORE, False),
+    "+unsure+outliers": (CANDIDATE_SCORE, True),
 }
 
 
@@ -139,8 +139,6 @@ def main(argv: list[str] | None = None) -> dict:
     days = args.days or sorted({image_day(mv["images"][0]) for mv in gt["multiview_images"]})
     ds = MvorDataset(args.data, gt, 1, ("color", "depth"), days=days)
     pipe = ScenePipeline.from_checkpoints(backend="auto", threads=args.threads)
-    from detector.skeleton_matching import SkeletonMatchConfig
-
     default_outlier = SkeletonMatchConfig().outlier_mm
     lowest = min([pipe.detector.cfg.score_threshold] + [c for c, _ in VARIANTS.values() if c is not None])
     pipes = {}

@@ -249,30 +249,19 @@ def main(argv: list[str] | None = None) -> dict:
     )
     sweep.add_argument("--centre-gate-mm", type=float, nargs="+", default=[default.centre_gate_mm],
                        help="box centres farther apart than this never match")  # fmt: skip
-    sweep.add_argument(
-        "--member-bonus-mm", nargs="+", default=[default.member_bonus_mm], type=_mm_or_none,
-        help="'none': the paper's order (more views first); a number: all combinations by mean distance minus "
-        "this per view beyond the first",
+    mm_or_none = (  # flag, field, help: 'none' switches each off
+        ("--member-bonus-mm", "member_bonus_mm", "'none': the paper's order (more views first); a number: all "
+         "combinations by mean distance minus this per view beyond the first"),
+        ("--link-reward-mm", "link_reward_mm", "'none': the greedy rule; a number: one optimal partition per "
+         "frame, each pair of grouped boxes earning this much against its skeleton distance "
+         "(detector.matching.choose_optimally)"),
+        ("--candidate-mm", "candidate_mm", "an unsure box joins a person whose fused skeleton lies within this "
+         "('none': never)"),
+        ("--outlier-mm", "outlier_mm", "a detected box this far from the rest of its person (>= 3 boxes) "
+         "leaves it ('none': never)"),
     )  # fmt: skip
-    sweep.add_argument(
-        "--link-reward-mm", nargs="+", default=[default.link_reward_mm], type=_mm_or_none,
-        help="'none': the greedy rule; a number: one optimal partition per frame, each pair of grouped boxes "
-        "earning this much against its skeleton distance (detector.matching.choose_optimally)",
-    )  # fmt: skip
-    sweep.add_argument(
-        "--candidate-mm",
-        nargs="+",
-        default=[default.candidate_mm],
-        type=_mm_or_none,
-        help="an unsure box joins a person whose fused skeleton lies within this ('none': never)",
-    )
-    sweep.add_argument(
-        "--outlier-mm",
-        nargs="+",
-        default=[default.outlier_mm],
-        type=_mm_or_none,
-        help="a box this far from the rest of its person (>= 3 boxes) leaves it ('none': never)",
-    )
+    for flag, name, text in mm_or_none:
+        sweep.add_argument(flag, nargs="+", default=[getattr(default, name)], type=_mm_or_none, help=text)
     parser.add_argument("--out", help="also write the metrics to this json file")
     args = parser.parse_args(argv)
 

@@ -115,10 +115,28 @@ def skeleton_distances(joints: np.ndarray, ok: np.ndarray) -> np.ndarray:
     joints, ok = np.asarray(joints, np.float64), np.asarray(ok, bool)
     if joints.ndim != 3 or joints.shape[-1] != 3 or ok.shape != joints.shape[:2]:
         raise ValueError(f"joints must be (N, J, 3) and ok (N, J), got {joints.shape}, {ok.shape}")
-    n, J = ok.shape
-    d = np.linalg.norm(joints[:, None] - joints[None, :], axis=-1)  # (N, N, J)
-    d[~(ok[:, None] & ok[None, :])] = np.nan
-    return _valid_median(d.reshape(n * n, J)).reshape(n, n)
+    return joint_median_distance(joints[:, None], ok[:, None], joints[None], ok[None])
+
+
+def joint_median_distance(a: np.ndarray, a_ok: np.ndarray, b: np.ndarray, b_ok: np.ndarray) -> np.ndarray:
+    """The median over the joints valid in both of the distance between skeletons ``a (..., J, 3)`` and
+    ``b (..., J, 3)`` (broadcast against each other, as their masks ``(..., J)``); NaN where none is valid."""
+    d = np.linalg.norm(a - b, axis=-1)  # (..., J)
+    d[~(a_ok & b_ok)] = np.nan
+    return _valid_median(d.reshape(-1, d.shape[-1])).reshape(d.shape[:-1])
+
+
+def box_starts(boxes: Sequence[np.ndarray]) -> np.ndarray:
+    """``(V + 1,)`` the number of the first box of each view (boxes are numbered in view order), then N."""
+    return np.concatenate([[0], np.cumsum([len(np.asarray(b).reshape(-1, 4)) for b in boxes])]).astype(
+        np.int64
+    )
+
+
+def _lifted(estimate) -> tuple[np.ndarray, np.ndarray]:
+    """A ``JointEstimate``'s joints ``(P, J, 3)`` and which of them are usable ``(P, J)`` (finite, with points)."""
+    joints = estimate.joints.float().cpu().numpy()
+    return joints, np.isfinite(joints).all(-1) & estimate.has_points.cpu().numpy()[:, None]
 
 
 def _units(dist: np.ndarray, view: np.ndarray, same_view_mm: float) -> np.ndarray:
@@ -208,8 +226,7 @@ def match_skeletons(
     """
     centres, view = box_centres_3d(boxes, depths, cameras)
     V = len(boxes)
-    starts = np.concatenate([[0], np.cumsum([len(np.asarray(b).reshape(-1, 4)) for b in boxes])])
-    local = np.arange(len(view)) - starts[view]
+    local = np.arange(len(view)) - box_starts(boxes)[view]
     groups = []
     for members, mean in group_skeletons(view, joints, ok, centres, V, config, max_combinations):
         indices = np.full(V, -1)
@@ -228,7 +245,7 @@ def match_skeletons(
 
 def members_of(groups: Sequence[Group], boxes: Sequence[np.ndarray]) -> np.ndarray:
     """``(P, S)`` box numbers (view order, as ``BoxHeatmaps``) of each group's boxes, -1 padded."""
-    starts = np.concatenate([[0], np.cumsum([len(np.asarray(b).reshape(-1, 4)) for b in boxes])])
+    starts = box_starts(boxes)
     rows = [[int(starts[v] + k) for v, k in [*enumerate(g.indices), *g.extra] if k >= 0] for g in groups]
     out = np.full((len(rows), max((len(r) for r in rows), default=0)), -1, np.int64)
     for p, r in enumerate(rows):
@@ -285,13 +302,12 @@ def match_heatmaps(
     do not stay in no group. Fuse the groups from the same heatmaps with
     ``heat.estimate(members_of(groups, boxes))``."""
     config = config or SkeletonMatchConfig()
-    alone = heat.single_view()
-    joints = alone.joints.float().cpu().numpy()  # (N, J, 3)
-    ok = np.isfinite(joints).all(-1) & alone.has_points.cpu().numpy()[:, None]  # (N, J)
+    joints, ok = _lifted(heat.single_view())  # (N, J, 3), (N, J)
     depths, cameras = [v.depth for v in views], [v.camera for v in views]
+    outlier_mm = config.outlier_mm if detected else None
     if candidate is None or not any(np.any(c) for c in candidate):
         groups = match_skeletons(boxes, depths, cameras, joints, ok, config, max_combinations)
-        return drop_outliers(heat, groups, boxes, joints, ok, config.outlier_mm if detected else None)
+        return drop_outliers(heat, groups, boxes, joints, ok, outlier_mm)
     sure = [~np.asarray(c, bool).reshape(-1) for c in candidate]
     flat = np.concatenate(sure)
     groups = match_skeletons([np.asarray(b).reshape(-1, 4)[k] for b, k in zip(boxes, sure, strict=True)],
@@ -304,7 +320,7 @@ def match_heatmaps(
     ]  # fmt: skip
     if config.candidate_mm is not None and groups:
         groups = admit_candidates(heat, groups, boxes, candidate, joints, ok, config.candidate_mm)
-    return drop_outliers(heat, groups, boxes, joints, ok, config.outlier_mm if detected else None)
+    return drop_outliers(heat, groups, boxes, joints, ok, outlier_mm)
 
 
 def drop_outliers(
@@ -328,14 +344,10 @@ def drop_outliers(
             owner.append((p, int(m[k])))
     if not rows:
         return groups
-    others = heat.estimate(np.stack(rows))  # (R, J, 3): each box's person without it
-    rest = others.joints.float().cpu().numpy()
-    rest_ok = np.isfinite(rest).all(-1) & others.has_points.cpu().numpy()[:, None]
+    rest, rest_ok = _lifted(heat.estimate(np.stack(rows)))  # (R, J, 3): each box's person without it
     b = np.array([n for _, n in owner])
-    d = np.linalg.norm(rest - joints[b], axis=-1)  # (R, J)
-    d[~(rest_ok & ok[b])] = np.nan
-    dist = np.nan_to_num(_valid_median(d), nan=-np.inf)  # (R,)
-    starts = np.concatenate([[0], np.cumsum([len(np.asarray(x).reshape(-1, 4)) for x in boxes])])
+    dist = np.nan_to_num(joint_median_distance(rest, rest_ok, joints[b], ok[b]), nan=-np.inf)  # (R,)
+    starts = box_starts(boxes)
     drop = {}
     for r, (p, n) in enumerate(owner):
         if dist[r] > within_mm and dist[r] > drop.get(p, (None, -np.inf))[1]:
@@ -369,10 +381,8 @@ def admit_candidates(
         heat: the ``BoxHeatmaps`` of all ``boxes``; groups: persons of the confident boxes (full indices);
         candidate: per view (K_v,) bool; joints, ok: (N, J, 3) / (N, J) every box's single-view skeleton.
     """
-    fused = heat.estimate(members_of(groups, boxes))
-    person = fused.joints.float().cpu().numpy()  # (P, J, 3)
-    person_ok = np.isfinite(person).all(-1) & fused.has_points.cpu().numpy()[:, None]  # (P, J)
-    starts = np.concatenate([[0], np.cumsum([len(np.asarray(b).reshape(-1, 4)) for b in boxes])])
+    person, person_ok = _lifted(heat.estimate(members_of(groups, boxes)))  # (P, J, 3), (P, J)
+    starts = box_starts(boxes)
     indices = [list(g.indices) for g in groups]
     for v, cand in enumerate(candidate):
         ks = np.flatnonzero(np.asarray(cand, bool).reshape(-1))
@@ -380,9 +390,9 @@ def admit_candidates(
         if not len(ks) or not ps:
             continue
         n = starts[v] + ks  # box numbers
-        d = np.linalg.norm(person[ps][:, None] - joints[n][None], axis=-1)  # (P', K', J)
-        d[~(person_ok[ps][:, None] & ok[n][None])] = np.nan
-        cost = _valid_median(d.reshape(-1, d.shape[-1])).reshape(len(ps), len(ks))
+        cost = joint_median_distance(
+            person[ps][:, None], person_ok[ps][:, None], joints[n][None], ok[n][None]
+        )
         cost = np.where(np.nan_to_num(cost, nan=np.inf) <= within_mm, cost, 1e9)
         for r, c in zip(*linear_sum_assignment(cost), strict=True):
             if cost[r, c] < 1e9:

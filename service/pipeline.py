@@ -268,8 +268,6 @@ class ScenePipeline:
         t0 = time.perf_counter()
         limit, why = self._person_limit(len(views))
         heat, members = None, None
-        if candidate is None or not any(c.any() for c in candidate):
-            candidate = None
         if person_ids is not None:
             ids, groups = group_by_ids(person_ids)
         elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
@@ -280,9 +278,6 @@ class ScenePipeline:
             timings["pose"] += _ms(t0) - timings["match"]
             ids = list(range(len(groups)))
         elif any(len(b) for b in boxes):
-            if candidate is not None:  # the centre matcher reads confident boxes only
-                boxes = [b[~c] for b, c in zip(boxes, candidate, strict=True)]
-                scores = [s[~c] for s, c in zip(scores, candidate, strict=True)]
             groups = self._match(boxes, views)
             ids = list(range(len(groups)))
         else:
