@@ -10,12 +10,16 @@ setting), and in detector mode once per variant of the skeleton matcher:
 - ``sure``: only boxes at or above the detector's threshold, every box kept in its person (before 2026-12-03);
 - ``+unsure``: boxes scored from ``PipelineConfig.candidate_score`` up may complete a person seen in other
   views (``detector.skeleton_matching``, step 5);
-- ``+unsure+outliers`` (the default): and a box far from the rest of its person leaves it (step 6).
+- ``+unsure+outliers``: and a box far from the rest of its person leaves it (step 6);
+- ``+unsure+outliers+unseen`` (the default): and a person of one view that another view sees in free space,
+  without a box there, is dropped (step 7).
 
 The detector runs once per frame (at the lowest score any variant reads); the variants then run one after
 another on the same frame, so that a loaded machine slows them alike. Prints per variant the MVOR per-support
 average (shoulders, hips, elbows, wrists) at 1 / 2 / 3 views and the overall MPJPE (10 joints, cm;
-``posenet.evaluate``), the ratio to the reference boxes, and the median / p95 milliseconds of the matcher
+``posenet.evaluate``), the ratio to the reference boxes, the persons returned that overlap no annotated
+person (``nobody``: false persons, or persons MVOR did not annotate, such as the patient), and the median / p95
+milliseconds of the matcher
 (``match``: lifting each box alone, grouping, fusing) and of the U-Net (``pose``).
 
 ``--picture PNG`` also draws the frame where the default took the most unsure boxes: every detected box of
@@ -41,10 +45,11 @@ from posenet.execution import machine_line
 from posenet.scene import views_of
 from service.pipeline import PipelineConfig, ScenePipeline
 
-VARIANTS = {  # name: (candidate_score, the outlier rule at its default)
-    "sure": (None, False),
-    "+unsure": (CANDIDATE_SCORE, False),
-    "+unsure+outliers": (CANDIDATE_SCORE, True),
+VARIANTS = {  # name: (candidate_score, the outlier rule at its default, the free-space rule at its default)
+    "sure": (None, False, False),
+    "+unsure": (CANDIDATE_SCORE, False, False),
+    "+unsure+outliers": (CANDIDATE_SCORE, True, False),
+    "+unsure+outliers+unseen": (CANDIDATE_SCORE, True, True),
 }
 
 
@@ -139,17 +144,19 @@ def main(argv: list[str] | None = None) -> dict:
     days = args.days or sorted({image_day(mv["images"][0]) for mv in gt["multiview_images"]})
     ds = MvorDataset(args.data, gt, 1, ("color", "depth"), days=days)
     pipe = ScenePipeline.from_checkpoints(backend="auto", threads=args.threads)
-    default_outlier = SkeletonMatchConfig().outlier_mm
-    lowest = min([pipe.detector.cfg.score_threshold] + [c for c, _ in VARIANTS.values() if c is not None])
+    default = SkeletonMatchConfig()
+    lowest = min([pipe.detector.cfg.score_threshold] + [v[0] for v in VARIANTS.values() if v[0] is not None])
     pipes = {}
     for name in args.variants:
-        candidate, outlier = VARIANTS[name]
-        match = SkeletonMatchConfig(outlier_mm=default_outlier if outlier else None)
+        candidate, outlier, unseen = VARIANTS[name]
+        match = SkeletonMatchConfig(outlier_mm=default.outlier_mm if outlier else None,
+                                    free_space_mm=default.free_space_mm if unseen else None)  # fmt: skip
         config = replace(PipelineConfig(), candidate_score=candidate, skeleton_match=match)
         pipes[name] = ScenePipeline(pipe.pose, pipe.detector, config)
     preds = {"reference": [], **{n: [] for n in pipes}}
     best = (-1, None)  # (unsure boxes taken, frame index) for --picture
     times = {n: {"match": [], "pose": []} for n in pipes}
+    nobody = dict.fromkeys(pipes, 0)
     for i in tqdm(range(len(ds)), desc="frames", unit="frame"):
         sample = ds[i]
         views = views_of(sample)
@@ -161,6 +168,7 @@ def main(argv: list[str] | None = None) -> dict:
             ids = ground_truth_ids(sample, [q.boxes for q in result.persons])
             preds[name] += [prediction_record(sample.id, pid, q.joints, q.spread_mm, q.confidence)
                             for q, pid in zip(result.persons, ids, strict=True) if pid is not None]  # fmt: skip
+            nobody[name] += sum(pid is None for pid in ids)
             for k in ("match", "pose"):
                 times[name][k].append(result.timings[k])
             if name == args.variants[-1] and args.picture:
@@ -176,14 +184,15 @@ def main(argv: list[str] | None = None) -> dict:
             "overall": r["overall"],
         }
         if name in times:
+            rows[name]["nobody"] = nobody[name]
             rows[name]["ms"] = {
                 k: [float(np.median(v)), float(np.percentile(v, 95))] for k, v in times[name].items()
             }
     ref = rows["reference"]["support"]
     print(f"{args.data} days {days}; {machine_line()}")
-    print("| boxes | 1 view | 2 views | 3 views | overall | ratio to reference (1 / 2 / 3) | match ms (median / p95) | "
-          "pose ms |")  # fmt: skip
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| boxes | 1 view | 2 views | 3 views | overall | ratio to reference (1 / 2 / 3) | nobody | "
+          "match ms (median / p95) | pose ms |")  # fmt: skip
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name, row in rows.items():
         sup = [row["support"].get(k) for k in ("1", "2", "3")]
         cells = " | ".join("-" if v is None else f"{v:.2f}" for v in sup)
@@ -196,7 +205,8 @@ def main(argv: list[str] | None = None) -> dict:
             else f"{ms['match'][0]:.1f} / {ms['match'][1]:.1f} | {ms['pose'][0]:.1f} / {ms['pose'][1]:.1f}"
         )
         print(
-            f"| {name} | {cells} | {row['overall']:.2f} | {ratio if name != 'reference' else ''} | {timing or ' | '} |"
+            f"| {name} | {cells} | {row['overall']:.2f} | {ratio if name != 'reference' else ''} | "
+            f"{row.get('nobody', '')} | {timing or ' | '} |"
         )
     if args.picture and best[1] is not None:
         variant = pipes[args.variants[-1]]

@@ -15,6 +15,8 @@ Without ``--predictions`` the matcher groups the reference boxes; with it, the d
   **missed** when none of its boxes is detected, **split** when its detected boxes lie in two or more groups,
   **merged** when its group also holds another person's box, and **found** otherwise (``complete`` when that
   group also has a box in every view where the person has one). missed + split + merged + found = persons.
+  Groups none of whose boxes pairs with an annotated box are **nobody**'s: false persons (or someone the file
+  does not annotate).
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ from posenet.scene import views_of
 
 # As service.pipeline.PipelineConfig.max_match_combinations: frames beyond it are refused, not enumerated.
 PAIRS_LIMIT = 300_000
-COUNTS = ("persons", "found", "complete", "missed", "split", "merged", "groups")
+COUNTS = ("persons", "found", "complete", "missed", "split", "merged", "groups", "nobody")
 
 
 def frame_association(
@@ -70,6 +72,7 @@ def frame_association(
     # Per view, pair detections with annotated boxes; record the group of each person's detected boxes.
     person_groups: dict[int, set] = defaultdict(set)
     group_persons: dict[int, set] = defaultdict(set)
+    annotated = set()  # groups with a box paired to an annotated box (of a person or not)
     for v in range(V):
         if len(gt_boxes[v]) == 0 or len(pred_boxes[v]) == 0:
             continue
@@ -77,11 +80,14 @@ def frame_association(
         rows, cols = linear_sum_assignment(-iou)
         for r, c in zip(rows, cols, strict=True):
             pid = int(gt_ids[v][r])
+            if iou[r, c] >= iou_threshold:
+                annotated.add(int(owner[v][c]))
             if iou[r, c] >= iou_threshold and pid >= 0:
                 person_groups[pid].add(int(owner[v][c]))
                 group_persons[int(owner[v][c])].add(pid)
     out = dict.fromkeys(COUNTS, 0)
     out["persons"], out["groups"] = len(persons), len(groups)
+    out["nobody"] = len(groups) - len(annotated)
     for p in persons:
         gs = person_groups.get(p, set())
         if not gs:
@@ -259,6 +265,8 @@ def main(argv: list[str] | None = None) -> dict:
          "('none': never)"),
         ("--outlier-mm", "outlier_mm", "a detected box this far from the rest of its person (>= 3 boxes) "
          "leaves it ('none': never)"),
+        ("--free-space-mm", "free_space_mm", "a detected person of one view is dropped when another view sees "
+         "its joints in free space (depth at most this in front), with no box there ('none': never)"),
     )  # fmt: skip
     for flag, name, text in mm_or_none:
         sweep.add_argument(flag, nargs="+", default=[getattr(default, name)], type=_mm_or_none, help=text)
@@ -291,8 +299,10 @@ def main(argv: list[str] | None = None) -> dict:
             link_reward_mm=r,
             candidate_mm=c,
             outlier_mm=o,
+            free_space_mm=f,
         )  # fmt: skip
         for t in args.skeleton_mm
+        for f in args.free_space_mm
         for c in args.candidate_mm
         for o in args.outlier_mm
         for s in args.same_view_mm
@@ -312,17 +322,18 @@ def main(argv: list[str] | None = None) -> dict:
     if sweeping:
         print(
             "| across views, mm | same view, mm | centre gate, mm | member bonus, mm | link reward, mm | unsure, mm "
-            "| outlier, mm | found | split | merged | missed | mean IoU |"
+            "| outlier, mm | free space, mm | found | split | merged | missed | nobody | mean IoU |"
         )
-        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for c, m in zip(configs, metrics, strict=True):
             m.update(boxes=boxes, matcher=args.matcher, config=dataclasses.asdict(c))
             bonus = "none" if c.member_bonus_mm is None else f"{c.member_bonus_mm:g}"
             reward = "none" if c.link_reward_mm is None else f"{c.link_reward_mm:g}"
-            unsure, outlier = (("none" if x is None else f"{x:g}") for x in (c.candidate_mm, c.outlier_mm))
+            unsure, outlier, free = (("none" if x is None else f"{x:g}")
+                                     for x in (c.candidate_mm, c.outlier_mm, c.free_space_mm))  # fmt: skip
             print(f"| {c.threshold_mm:g} | {c.same_view_mm:g} | {c.centre_gate_mm:g} | {bonus} | {reward} | {unsure} | "
-                  f"{outlier} | {m['found_rate']:.3f} | "
-                  f"{m['split_rate']:.3f} | {m['merged_rate']:.3f} | {m['missed_rate']:.3f} | {m['mean_iou']:.3f} |")  # fmt: skip
+                  f"{outlier} | {free} | {m['found_rate']:.3f} | {m['split_rate']:.3f} | {m['merged_rate']:.3f} | "
+                  f"{m['missed_rate']:.3f} | {m['nobody']} | {m['mean_iou']:.3f} |")  # fmt: skip
     else:
         metrics["boxes"] = boxes
         metrics["matcher"] = args.matcher

@@ -128,16 +128,29 @@ def area_xyxy(boxes: ArrayLike) -> ArrayLike:
     return np.maximum(w, 0) * np.maximum(h, 0)
 
 
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """IoU of xyxy boxes ``a (..., 4)`` and ``b (..., 4)``, broadcast against each other (numpy float64).
-
-    Inverted boxes have area 0; two boxes of area 0 have IoU 0."""
+def _intersection(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``a``, ``b`` as float64 xyxy boxes and the area of their intersection, broadcast (numpy)."""
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     _check("a", a)
     _check("b", b)
     lo = np.maximum(a[..., :2], b[..., :2])
     hi = np.minimum(a[..., 2:], b[..., 2:])
-    inter = np.prod(np.clip(hi - lo, 0, None), axis=-1)
+    return a, b, np.prod(np.clip(hi - lo, 0, None), axis=-1)
+
+
+def box_coverage(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The fraction of box ``b``'s area that box ``a`` covers, xyxy ``(..., 4)`` broadcast (numpy float64; 0 for
+    a ``b`` of area 0)."""
+    a, b, inter = _intersection(a, b)
+    area = area_xyxy(b)
+    return np.where(area > 0, inter / np.maximum(area, 1e-12), 0.0)
+
+
+def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """IoU of xyxy boxes ``a (..., 4)`` and ``b (..., 4)``, broadcast against each other (numpy float64).
+
+    Inverted boxes have area 0; two boxes of area 0 have IoU 0."""
+    a, b, inter = _intersection(a, b)
     union = area_xyxy(a) + area_xyxy(b) - inter
     return np.where(union > 0, inter / np.maximum(union, 1e-12), 0.0)
 

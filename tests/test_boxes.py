@@ -132,3 +132,14 @@ def test_persons_are_the_boxes_with_an_identity():
     assert one[2] is None and B.boxes_of_person(boxes, ids, 7) == [None, None, None]
     dense = B.dense_boxes([one], 3)
     assert dense.shape == (1, 3, 4) and np.isnan(dense[0, 2]).all() and not np.isnan(dense[0, :2]).any()
+
+
+def test_box_coverage_is_the_covered_fraction_of_the_second_box():
+    from posenet.boxes import box_coverage
+
+    big, small = np.array([0.0, 0, 10, 10]), np.array([2.0, 2, 4, 4])
+    assert box_coverage(big, small) == 1.0 and box_coverage(small, big) == pytest.approx(0.04)
+    half = np.array([5.0, 0, 15, 10])
+    assert box_coverage(half, big) == pytest.approx(0.5)
+    assert box_coverage(np.stack([big, half]), big).tolist() == pytest.approx([1.0, 0.5])  # broadcast
+    assert box_coverage(big, np.array([3.0, 3, 3, 3])) == 0.0  # nothing to cover

@@ -300,6 +300,11 @@ def test_association_counts_found_split_merged():
     unowned = [Group((0, 0, 0), c, 0.0), Group((1, 1, -1), c, 0.0)]
     out = frame_association(boxes, ids, boxes, unowned)
     assert (out["found"], out["complete"], out["split"]) == (2, 1, 0)
+    assert out["nobody"] == 0
+    # A box far from every annotated box, alone in its group: a person that is nobody
+    far = [np.concatenate([b, [[0.0, 0.0, 5.0, 5.0]]]) for b in boxes]
+    out = frame_association(boxes, ids, far, [*groups, Group((2, -1, -1), c, 0.0)])
+    assert (out["found"], out["groups"], out["nobody"]) == (2, 3, 1)
     # Nothing detected -> both missed; the paper's score is 0.
     empty = [np.zeros((0, 4))] * 3
     out = frame_association(boxes, ids, empty, [])

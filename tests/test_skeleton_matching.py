@@ -412,3 +412,43 @@ def test_association_reads_unsure_detections_as_the_service_does(tiny):
     used = evaluate_association(tiny[1], sure + unsure, candidate_score=0.25, **kwargs)
     assert used["found"] + used["split"] + used["merged"] + used["missed"] == used["persons"]
     assert used["missed"] <= alone["missed"]
+
+
+def test_a_person_one_view_saw_where_another_sees_free_space_is_dropped():
+    """Step 7: view 0 has a box of a skeleton 3 m ahead; view 1 (identical camera) looks at it too. Behind the
+    skeleton only background (free space) and no box there: nobody. An occluder in front of it, or a box of view
+    1 over it, or the skeleton outside view 1's image: the person stays."""
+    from detector.matching import Group
+    from detector.skeleton_matching import drop_unseen, visible_joints
+    from posenet.cameras import Camera
+    from posenet.scene import SceneView
+
+    W, H = 160, 120
+    cam = Camera.create(100.0, 100.0, (W - 1) / 2, (H - 1) / 2, size=(W, H))
+    person = TEMPLATE + [0, 300, 3000]  # (J, 3) mm in the reference frame (view 0 = view 1 = the reference)
+    joints, ok = person[None], np.ones((1, 10), bool)
+    wall = np.full((H, W), 6000, np.uint16)
+
+    def views(depth1):
+        return [SceneView(None, wall, cam), SceneView(None, depth1, cam)]
+
+    groups = [Group((0, -1), np.zeros(3), 0.0)]
+    no_box = [np.array([[40.0, 10.0, 120.0, 110.0]]), np.zeros((0, 4))]
+    assert visible_joints(person, views(wall)[1], 300.0)[0] == 10
+    assert drop_unseen(groups, views(wall), no_box, joints, ok, 300.0, 6) == []
+    # the measured depth 20 cm in front of the joints (the body's surface, or the clutter itself): still seen
+    assert drop_unseen(groups, views(np.full((H, W), 2800, np.uint16)), no_box, joints, ok, 300.0, 6) == []
+    occluder = np.full((H, W), 1500, np.uint16)  # something 1.5 m from view 1 hides the person
+    assert visible_joints(person, views(occluder)[1], 300.0)[0] == 0
+    assert drop_unseen(groups, views(occluder), no_box, joints, ok, 300.0, 6) == groups
+    unknown = np.zeros((H, W), np.uint16)  # no depth: no evidence
+    assert drop_unseen(groups, views(unknown), no_box, joints, ok, 300.0, 6) == groups
+    boxed = [no_box[0], no_box[0]]  # view 1 has a box over the projection: a matching problem, not clutter
+    assert drop_unseen(groups, views(wall), boxed, joints, ok, 300.0, 6) == groups
+    aside = TEMPLATE + [5000, 300, 3000]  # outside both images
+    assert visible_joints(aside, views(wall)[1], 300.0) == (0, None)
+    assert drop_unseen(groups, views(wall), no_box, aside[None], ok, 300.0, 6) == groups
+    # a person of two views, or the rule off, is never dropped
+    two = [Group((0, 0), np.zeros(3), 0.0)]
+    assert drop_unseen(two, views(wall), boxed, np.stack([person, person]), np.ones((2, 10), bool), 300.0, 6)
+    assert drop_unseen(groups, views(wall), no_box, joints, ok, None, 6) == groups

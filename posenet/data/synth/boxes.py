@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from posenet.boxes import box_coverage
 from posenet.data.synth.rig import Rig
 
 
@@ -24,6 +25,4 @@ def project_boxes(rig: Rig, pts: np.ndarray) -> np.ndarray:
 
 def covered(a: np.ndarray, b: np.ndarray) -> float:
     """Fraction of box ``b``'s area covered by box ``a`` (xyxy)."""
-    iw = max(min(a[2], b[2]) - max(a[0], b[0]), 0)
-    ih = max(min(a[3], b[3]) - max(a[1], b[1]), 0)
-    return float(iw * ih / max((b[2] - b[0]) * (b[3] - b[1]), 1e-9))
+    return float(box_coverage(a, b))
