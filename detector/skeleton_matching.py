@@ -421,27 +421,28 @@ def admit_candidates(
     ]
 
 
-def visible_joints(points: np.ndarray, view: SceneView, free_mm: float) -> tuple[int, np.ndarray | None]:
-    """How many of ``points (K, 3)`` (mm, reference frame) ``view`` sees unobstructed, and the xyxy box around
-    their projections (None when none projects into the image).
+def seen_from(
+    view: SceneView, points: np.ndarray, free_mm: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which of ``points (K, 3)`` (mm, reference frame) ``view`` sees unobstructed.
 
-    A point is seen when it projects into the image in front of the camera and the depth measured there (the
-    median valid depth over 5 x 5 pixels) is at most ``free_mm`` short of the point's own depth: no surface
-    hides it. Pixels without depth say nothing."""
-    if not len(points):
-        return 0, None
+    Returns ``(seen (K,), inside (K,), uv (K, 2))``: a point is inside when it projects into the image in front
+    of the camera, and seen when, moreover, the depth measured there (the median valid depth over 5 x 5 pixels)
+    is at most ``free_mm`` short of the point's own depth: no surface hides it. Pixels without depth say
+    nothing."""
     camera = view.camera
-    p = torch.as_tensor(np.asarray(points), dtype=camera.K.dtype)
+    p = torch.as_tensor(np.asarray(points, np.float64).reshape(-1, 3), dtype=camera.K.dtype)
     z = camera.to_camera(p)[:, 2].numpy()  # (K,)
     uv = camera.project(p).numpy()  # (K, 2)
     h, w = view.depth.shape
-    inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-    if not inside.any():
-        return 0, None
-    u, v = uv[inside, 0], uv[inside, 1]
-    measured = box_depths(np.stack([u - 2.5, v - 2.5, u + 2.5, v + 2.5], 1), view.depth, 1.0, 5)  # (k,)
-    seen = np.nan_to_num(measured, nan=-np.inf) >= z[inside] - free_mm
-    return int(seen.sum()), np.array([u.min(), v.min(), u.max(), v.max()])
+    with np.errstate(invalid="ignore"):
+        inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    seen = np.zeros(len(z), bool)
+    if inside.any():
+        u, v = uv[inside, 0], uv[inside, 1]
+        measured = box_depths(np.stack([u - 2.5, v - 2.5, u + 2.5, v + 2.5], 1), view.depth, 1.0, 5)
+        seen[inside] = np.nan_to_num(measured, nan=-np.inf) >= z[inside] - free_mm
+    return seen, inside, uv
 
 
 def drop_unseen(
@@ -449,30 +450,32 @@ def drop_unseen(
     ok: np.ndarray, free_mm: float | None, min_joints: int, covered: float = 0.5,
 ) -> list[Group]:  # fmt: skip
     """Drop the persons of one view that another view should have seen (step 7 of the module docstring): at
-    least ``min_joints`` of the single-view skeleton's joints visible there (:func:`visible_joints`) and no box
-    of that view covering ``covered`` of their projections' box. Use on detected boxes only.
+    least ``min_joints`` of the single-view skeleton's usable joints seen there (:func:`seen_from`) and no box
+    of that view covering ``covered`` of the box around the joints' projections. Use on detected boxes only.
 
     Args: as :func:`admit_candidates`, and the frame's ``views``; ``free_mm`` None returns ``groups``."""
     if free_mm is None:
         return groups
     starts = box_starts(boxes)
-    out = []
-    for g in groups:
+    alone = {}  # person: (its view, its box number), for persons of one view
+    for p, g in enumerate(groups):
         seen_in = [v for v, k in enumerate(g.indices) if k >= 0]
         if len(seen_in) == 1:
-            n = starts[seen_in[0]] + g.indices[seen_in[0]]
-            if any(_unexplained(joints[n][ok[n]], views[v], boxes[v], free_mm, min_joints, covered)
-                   for v in range(len(views)) if v != seen_in[0]):  # fmt: skip
-                continue
-        out.append(g)
-    return out
-
-
-def _unexplained(points, view, boxes, free_mm, min_joints, covered) -> bool:
-    """``view`` sees ``min_joints`` of ``points`` unobstructed and none of its ``boxes`` covers them."""
-    count, region = visible_joints(points, view, free_mm)
-    if count < min_joints:
-        return False
-    # a point-sized region (one joint inside the image) is covered by a box around it
-    region = region + np.array([-0.5, -0.5, 0.5, 0.5])
-    return not np.any(box_coverage(np.asarray(boxes, np.float64).reshape(-1, 4), region) >= covered)
+            alone[p] = (seen_in[0], int(starts[seen_in[0]] + g.indices[seen_in[0]]))
+    drop = set()
+    for v, view in enumerate(views):
+        rows = [(p, n) for p, (v0, n) in alone.items() if v0 != v and p not in drop]
+        if not rows:
+            continue
+        n = np.array([b for _, b in rows])
+        J = joints.shape[1]
+        seen, inside, uv = seen_from(view, joints[n].reshape(-1, 3), free_mm)  # all their joints at once
+        seen, inside, uv = seen.reshape(-1, J) & ok[n], inside.reshape(-1, J) & ok[n], uv.reshape(-1, J, 2)
+        view_boxes = np.asarray(boxes[v], np.float64).reshape(-1, 4)
+        for r in np.flatnonzero(seen.sum(1) >= min_joints):
+            at = uv[r][inside[r]]
+            # the box around the projections (a point-sized one is covered by any box around it)
+            region = np.concatenate([at.min(0) - 0.5, at.max(0) + 0.5])
+            if not np.any(box_coverage(view_boxes, region) >= covered):
+                drop.add(rows[r][0])
+    return [g for p, g in enumerate(groups) if p not in drop]

@@ -368,11 +368,13 @@ class ScenePipeline:
     ):
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
-        Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds spent after
-        the U-Net, per person and view the indices of its boxes there, and their ``(P, S)`` box numbers."""
+        Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds of the
+        association (after the U-Net and each box's softmax moments, which the fusion needs with any grouping),
+        per person and view the indices of its boxes there, and their ``(P, S)`` box numbers."""
         from detector.skeleton_matching import match_heatmaps, members_of, view_members
 
         heat = self.pose.box_heatmaps(list(views), boxes)
+        heat.reduce()  # the fusion's per-box softmax, needed whatever groups the boxes: the pose stage's
         t0 = time.perf_counter()
         config = self.config.skeleton_match
         if config is None and self.config.matcher == "skeletons-greedy":
