@@ -137,6 +137,8 @@ class BoxHeatmaps:
             raise ValueError(f"members must be (P, S) box numbers, got shape {tuple(members.shape)}")
         if members.numel() and int(members.max()) >= self.num_boxes:
             raise ValueError(f"members name box {int(members.max())} of {self.num_boxes}")
+        if all(p.points is not None for p in self.passes):  # the 3D aggregation: from the boxes' moments
+            return self._fuse(members.numpy())
         size = (members >= 0).sum(1)  # (P,)
         parts = []
         # Persons are fused in buckets of equal box count, each padded only to its own count (one person with
@@ -159,10 +161,11 @@ class BoxHeatmaps:
         return out
 
     def _estimate(self, members: Tensor) -> JointEstimate:
-        """:meth:`estimate` of persons padded to one slot count S: members (P, S)."""
+        """:meth:`estimate` of persons padded to one slot count S, members (P, S), for the 2D baseline (which
+        lifts per joint from the pixels)."""
         used = members >= 0  # (P, S)
         slot = members.clamp_min(0)  # (P, S)
-        cams = self.cameras[self.view[slot]] if self.passes[0].points is None else None  # batch (P, S)
+        cams = self.cameras[self.view[slot]]  # batch (P, S)
         if members.shape[1] == 1 and torch.equal(members[:, 0], torch.arange(self.num_boxes)):
             take = lambda x: x.unsqueeze(1)  # noqa: E731  every box alone, in order: a view, no gather copy
         else:
@@ -170,9 +173,6 @@ class BoxHeatmaps:
         outs = []
         with torch.inference_mode():
             for p in self.passes:
-                if p.points is not None:  # the 3D aggregation, from each box's cloud moments
-                    outs.append(self._combine(p, slot, used))
-                    continue
                 valid = take(p.valid) & used.unsqueeze(-1)  # (P, S, M)
                 outs.append(self.estimate_fn(take(p.logits), take(p.uv), take(p.depth), valid, cams))
         joints = torch.stack([o.joints for o in outs]).mean(0)
@@ -180,22 +180,42 @@ class BoxHeatmaps:
         has_points = torch.stack([o.has_points for o in outs]).all(0)
         return JointEstimate(joints, confidence, has_points)
 
-    def _combine(self, p: BoxPass, slot: Tensor, used: Tensor) -> JointEstimate:
-        """``lifting.aggregate`` over each person's boxes ``slot (P, S)`` (``used``), from the boxes' moments."""
-        lse, mean, var, has = p.moments(self.eps)
-        logw = lse[slot].masked_fill(~used.unsqueeze(-1), -torch.inf)  # (P, S, J)
-        w = torch.softmax(logw, dim=1).nan_to_num(0.0)  # a person without boxes: all weights 0
-        mu = mean[slot]  # (P, S, J, 3)
-        joints = (w.unsqueeze(-1) * mu).sum(1)  # (P, J, 3)
-        spread = (w * (var[slot] + ((mu - joints.unsqueeze(1)) ** 2).sum(-1))).sum(1)  # (P, J)
-        has_points = (has[slot] & used).any(1)
-        return JointEstimate(joints.float(), (spread + 1e-6).sqrt().float(), has_points)
+    def _fuse(self, members: np.ndarray) -> JointEstimate:
+        """``lifting.aggregate`` over each person's boxes ``members (P, S)`` (-1: no box), from the boxes' moments:
+        a softmax over the union of clouds is each cloud's softmax weighted by its log-sum-exp. A person is a few
+        boxes of a few numbers each, so this is numpy (torch's per-call overhead would dominate), without buckets.
+        """
+        if members.shape[1] == 0:  # no slots at all: one empty slot each
+            members = np.full((len(members), 1), -1, np.int64)
+        used = members >= 0  # (P, S)
+        slot = np.maximum(members, 0)
+        joints, spread, has_points = [], [], []
+        for p in self.passes:
+            lse, mean, var, has = (m.numpy() for m in p.moments(self.eps))
+            logw = np.where(used[..., None], lse[slot], -np.inf)  # (P, S, J)
+            top = logw.max(1, keepdims=True)
+            w = np.exp(logw - np.where(np.isfinite(top), top, 0.0))
+            total = w.sum(1, keepdims=True)
+            w = np.divide(
+                w, total, out=np.zeros_like(w), where=total > 0
+            )  # a person without boxes: weights 0
+            mu = mean[slot]  # (P, S, J, 3)
+            fused = (w[..., None] * mu).sum(1)  # (P, J, 3)
+            joints.append(fused.astype(np.float32))
+            s2 = (w * (var[slot] + ((mu - fused[:, None]) ** 2).sum(-1))).sum(1)  # (P, J)
+            spread.append(np.sqrt(s2 + 1e-6).astype(np.float32))
+            has_points.append((has[slot] & used).any(1))
+        return JointEstimate(
+            torch.from_numpy(np.mean(joints, 0, dtype=np.float32)),
+            torch.from_numpy(np.mean(spread, 0, dtype=np.float32)),
+            torch.from_numpy(np.all(has_points, 0)),
+        )
 
     def single_view(self) -> JointEstimate:
         """Each box lifted alone: joints (N, J, 3), confidence (N, J), has_points (N,)."""
         if any(p.points is None for p in self.passes):  # the 2D baseline lifts per joint
             return self.estimate(torch.arange(self.num_boxes)[:, None])
-        # a cloud alone is its own moments (what _combine gives for one box, without the gathers)
+        # a cloud alone is its own moments (what _fuse gives for one box, without the gathers)
         moments = [p.moments(self.eps) for p in self.passes]
         return JointEstimate(
             torch.stack([m[1].float() for m in moments]).mean(0),

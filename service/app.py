@@ -16,6 +16,7 @@ from fastapi import FastAPI, Request
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
 
+from detector.skeleton_matching import SkeletonMatchConfig
 from posenet.track import Tracker, TrackerConfig
 from service.errors import InputError
 from service.limits import BodyLimitMiddleware, InFlightLimiter
@@ -24,6 +25,16 @@ from service.routes import docs_router, protected, public
 from service.schemas import SceneIn
 from service.settings import Settings
 from service.streams import StreamRegistry
+
+
+def pipeline_config(settings: Settings) -> PipelineConfig:
+    """The pipeline's knobs from the service's settings."""
+    return PipelineConfig(
+        max_pose_pixels=settings.max_pose_pixels,
+        matcher=settings.matcher,
+        candidate_score=settings.candidate_score,
+        skeleton_match=SkeletonMatchConfig(free_space_mm=settings.free_space_mm or None),
+    )
 
 
 @asynccontextmanager
@@ -38,11 +49,7 @@ async def lifespan(app: FastAPI):
                 settings.detector_checkpoint,
                 settings.device,
                 settings.load_detector,
-                PipelineConfig(
-                    max_pose_pixels=settings.max_pose_pixels,
-                    matcher=settings.matcher,
-                    candidate_score=settings.candidate_score,
-                ),
+                pipeline_config(settings),
                 settings.precision,
                 settings.backend,
                 settings.threads,

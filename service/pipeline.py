@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -376,9 +376,9 @@ class ScenePipeline:
         heat = self.pose.box_heatmaps(list(views), boxes)
         heat.reduce()  # the fusion's per-box softmax, needed whatever groups the boxes: the pose stage's
         t0 = time.perf_counter()
-        config = self.config.skeleton_match
-        if config is None and self.config.matcher == "skeletons-greedy":
-            config = SkeletonMatchConfig(link_reward_mm=None)
+        config = self.config.skeleton_match or SkeletonMatchConfig()
+        if self.config.matcher == "skeletons-greedy":
+            config = replace(config, link_reward_mm=None)
         groups = match_heatmaps(
             heat,
             views,

@@ -12,7 +12,7 @@ from typing import Literal
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from detector.skeleton_matching import CANDIDATE_SCORE
+from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig
 from posenet.track import TrackerConfig
 
 
@@ -79,6 +79,14 @@ class Settings(BaseSettings):
         le=1,
         description="detector mode, skeleton matcher: boxes scored from this up to the detector's threshold "
         "may complete a person seen in other views (1: only the detector's sure boxes)",
+    )
+    # detector.skeleton_matching, step 7: a person only one view saw is dropped when another view sees its
+    # joints in free space with no box there. 0 turns it off (depth that cannot be trusted to show free space).
+    free_space_mm: float = Field(
+        SkeletonMatchConfig.free_space_mm,
+        ge=0,
+        description="detector mode, skeleton matcher: drop a person only one view saw when another view measures "
+        "depth at most this many mm in front of 6 or more of its joints and has no box there (0: never)",
     )
     retry_after_s: int = Field(1, ge=1, le=3600, description="Retry-After seconds sent with a 503")
     # 3 views of 640x480 PNG colour + depth are about 2-3 MB; 64 MiB leaves room for 8 large views.

@@ -127,3 +127,19 @@ def test_detector_loads_only_when_its_weights_exist(tmp_path, monkeypatch):
     assert ScenePipeline.from_checkpoints(pose, det, load_detector=None).detector is not None
     with pytest.raises(FileNotFoundError):
         ScenePipeline.from_checkpoints(pose, None, load_detector=True)
+
+
+def test_settings_reach_the_pipeline(monkeypatch):
+    """ORPOSE_* knobs of the matcher become the pipeline's config; 0 turns the free-space rule off."""
+    from service.app import pipeline_config
+    from service.settings import Settings
+
+    default = pipeline_config(Settings())
+    assert default.skeleton_match.free_space_mm == 300.0 and default.candidate_score == 0.25
+    monkeypatch.setenv("ORPOSE_FREE_SPACE_MM", "0")
+    monkeypatch.setenv("ORPOSE_CANDIDATE_SCORE", "1")
+    off = pipeline_config(Settings())
+    assert off.skeleton_match.free_space_mm is None and off.candidate_score == 1.0
+    monkeypatch.setenv("ORPOSE_FREE_SPACE_MM", "-5")
+    with pytest.raises(ValueError, match="free_space_mm"):
+        Settings()
