@@ -24,7 +24,7 @@ milliseconds of the matcher
 
 ``--picture PNG`` also draws the frame where the default took the most unsure boxes: every detected box of
 each view, coloured by the person it ended in (solid: sure, dashed: unsure and taken), unsure boxes that
-completed nobody dotted grey, and sure boxes in no person (dropped as outliers) in red.
+completed nobody dotted grey, and sure boxes in no person (dropped as outliers, or by the free-space rule) in red.
 """
 
 from __future__ import annotations
@@ -118,7 +118,7 @@ def draw_frame(pipe: ScenePipeline, sample, out: Path) -> None:
                 style = {"edgecolor": "red", "linestyle": "-", "linewidth": 2.2}
             ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, **style))
     fig.suptitle(f"{sample.id}: solid = sure box, dashed = unsure box that completed its person, dotted grey = "
-                 "unsure box left out, red = sure box in no person (an outlier); colour = person", fontsize=8)  # fmt: skip
+                 "unsure box left out, red = sure box in no person (an outlier, or nobody by free space); colour = person", fontsize=8)  # fmt: skip
     fig.tight_layout()
     fig.savefig(out, dpi=72)
     plt.close(fig)

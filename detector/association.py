@@ -80,9 +80,10 @@ def frame_association(
         rows, cols = linear_sum_assignment(-iou)
         for r, c in zip(rows, cols, strict=True):
             pid = int(gt_ids[v][r])
-            if iou[r, c] >= iou_threshold:
-                annotated.add(int(owner[v][c]))
-            if iou[r, c] >= iou_threshold and pid >= 0:
+            if iou[r, c] < iou_threshold:
+                continue
+            annotated.add(int(owner[v][c]))
+            if pid >= 0:
                 person_groups[pid].add(int(owner[v][c]))
                 group_persons[int(owner[v][c])].add(pid)
     out = dict.fromkeys(COUNTS, 0)
@@ -327,12 +328,10 @@ def main(argv: list[str] | None = None) -> dict:
         print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for c, m in zip(configs, metrics, strict=True):
             m.update(boxes=boxes, matcher=args.matcher, config=dataclasses.asdict(c))
-            bonus = "none" if c.member_bonus_mm is None else f"{c.member_bonus_mm:g}"
-            reward = "none" if c.link_reward_mm is None else f"{c.link_reward_mm:g}"
-            unsure, outlier, free = (("none" if x is None else f"{x:g}")
-                                     for x in (c.candidate_mm, c.outlier_mm, c.free_space_mm))  # fmt: skip
-            print(f"| {c.threshold_mm:g} | {c.same_view_mm:g} | {c.centre_gate_mm:g} | {bonus} | {reward} | {unsure} | "
-                  f"{outlier} | {free} | {m['found_rate']:.3f} | {m['split_rate']:.3f} | {m['merged_rate']:.3f} | "
+            switches = " | ".join("none" if x is None else f"{x:g}"
+                                  for x in (getattr(c, name) for _, name, _ in mm_or_none))  # fmt: skip
+            print(f"| {c.threshold_mm:g} | {c.same_view_mm:g} | {c.centre_gate_mm:g} | {switches} | "
+                  f"{m['found_rate']:.3f} | {m['split_rate']:.3f} | {m['merged_rate']:.3f} | "
                   f"{m['missed_rate']:.3f} | {m['nobody']} | {m['mean_iou']:.3f} |")  # fmt: skip
     else:
         metrics["boxes"] = boxes

@@ -310,8 +310,9 @@ def match_heatmaps(
     """Lift each box of ``heat`` (a ``posenet.box_poses.BoxHeatmaps`` of ``boxes``) alone and group the boxes.
 
     ``detected``: the boxes come from a detector, so a box far from the rest of its person is dropped (step 6),
-    and so is a one-view person that another view should have seen (step 7); boxes a user sent are never dropped (on reference boxes without ids the rule split more persons than it
-    mended: day 4 of the twin, found 94.5 -> 94.1 %).
+    and so is a one-view person that another view should have seen (step 7). Boxes a user sent are never dropped
+    (on reference boxes without ids step 6 split more persons than it mended: day 4 of the twin, found 94.5 ->
+    94.1 %).
 
     ``candidate``: per view ``(K_v,)`` bool, the boxes the detector was unsure of (below its threshold): they
     are left out of the grouping and may then complete persons (step 5 of the module docstring); those that
@@ -320,26 +321,25 @@ def match_heatmaps(
     config = config or SkeletonMatchConfig()
     joints, ok = _lifted(heat.single_view())  # (N, J, 3), (N, J)
     depths, cameras = [v.depth for v in views], [v.camera for v in views]
-    outlier_mm = config.outlier_mm if detected else None
-    free_mm = config.free_space_mm if detected else None
     if candidate is None or not any(np.any(c) for c in candidate):
         groups = match_skeletons(boxes, depths, cameras, joints, ok, config, max_combinations)
-        groups = drop_outliers(heat, groups, boxes, joints, ok, outlier_mm)
-        return drop_unseen(groups, views, boxes, joints, ok, free_mm, config.min_visible_joints)
-    sure = [~np.asarray(c, bool).reshape(-1) for c in candidate]
-    flat = np.concatenate(sure)
-    groups = match_skeletons([np.asarray(b).reshape(-1, 4)[k] for b, k in zip(boxes, sure, strict=True)],
-                             depths, cameras, joints[flat], ok[flat], config, max_combinations)  # fmt: skip
-    index = [np.flatnonzero(k) for k in sure]  # a confident box's index in its view's full list
-    groups = [
-        Group(tuple(int(index[v][k]) if k >= 0 else -1 for v, k in enumerate(g.indices)), g.centre,
-              g.mean_distance, tuple((v, int(index[v][k])) for v, k in g.extra))
-        for g in groups
-    ]  # fmt: skip
-    if config.candidate_mm is not None and groups:
-        groups = admit_candidates(heat, groups, boxes, candidate, joints, ok, config.candidate_mm)
-    groups = drop_outliers(heat, groups, boxes, joints, ok, outlier_mm)
-    return drop_unseen(groups, views, boxes, joints, ok, free_mm, config.min_visible_joints)
+    else:
+        sure = [~np.asarray(c, bool).reshape(-1) for c in candidate]
+        flat = np.concatenate(sure)
+        groups = match_skeletons([np.asarray(b).reshape(-1, 4)[k] for b, k in zip(boxes, sure, strict=True)],
+                                 depths, cameras, joints[flat], ok[flat], config, max_combinations)  # fmt: skip
+        index = [np.flatnonzero(k) for k in sure]  # a confident box's index in its view's full list
+        groups = [
+            Group(tuple(int(index[v][k]) if k >= 0 else -1 for v, k in enumerate(g.indices)), g.centre,
+                  g.mean_distance, tuple((v, int(index[v][k])) for v, k in g.extra))
+            for g in groups
+        ]  # fmt: skip
+        if config.candidate_mm is not None and groups:
+            groups = admit_candidates(heat, groups, boxes, candidate, joints, ok, config.candidate_mm)
+    if not detected:
+        return groups
+    groups = drop_outliers(heat, groups, boxes, joints, ok, config.outlier_mm)
+    return drop_unseen(groups, views, boxes, joints, ok, config.free_space_mm, config.min_visible_joints)
 
 
 def drop_outliers(

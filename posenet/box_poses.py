@@ -213,15 +213,7 @@ class BoxHeatmaps:
 
     def single_view(self) -> JointEstimate:
         """Each box lifted alone: joints (N, J, 3), confidence (N, J), has_points (N,)."""
-        if any(p.points is None for p in self.passes):  # the 2D baseline lifts per joint
-            return self.estimate(torch.arange(self.num_boxes)[:, None])
-        # a cloud alone is its own moments (what _fuse gives for one box, without the gathers)
-        moments = [p.moments(self.eps) for p in self.passes]
-        return JointEstimate(
-            torch.stack([m[1].float() for m in moments]).mean(0),
-            torch.stack([(m[2] + 1e-6).sqrt().float() for m in moments]).mean(0),
-            torch.stack([m[3] for m in moments]).all(0),
-        )
+        return self.estimate(torch.arange(self.num_boxes)[:, None])
 
 
 def slot_layout(boxes: Sequence[np.ndarray]) -> tuple[Tensor, Tensor, Tensor, Tensor]:

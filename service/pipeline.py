@@ -22,7 +22,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig
+from detector.skeleton_matching import (
+    CANDIDATE_SCORE,
+    SkeletonMatchConfig,
+    match_heatmaps,
+    members_of,
+    split_unsure,
+    view_members,
+)
 from posenet.boxes import ground_truth_ids, hull, identified
 from posenet.data.sample import Sample
 from posenet.evaluate import prediction_record
@@ -54,7 +61,7 @@ class PipelineConfig:
     # a person seen confidently in other views (detector.skeleton_matching, step 5); they never start one.
     # None: only the detector's confident boxes are used.
     candidate_score: float | None = CANDIDATE_SCORE
-    # The skeleton matcher's thresholds (None: its defaults, with the greedy rule for "skeletons-greedy").
+    # The skeleton matcher's thresholds (None: its defaults; "skeletons-greedy" always takes the greedy rule).
     skeleton_match: SkeletonMatchConfig | None = None
 
     def __post_init__(self) -> None:
@@ -359,8 +366,6 @@ class ScenePipeline:
         scores = [np.asarray(d.scores, np.float32).reshape(-1) for d in detections]  # (K_v,) each
         if not use_low:
             return boxes, scores, None
-        from detector.skeleton_matching import split_unsure
-
         return split_unsure(boxes, scores, threshold)
 
     def _match_skeletons(
@@ -371,8 +376,6 @@ class ScenePipeline:
         Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds of the
         association (after the U-Net and each box's softmax moments, which the fusion needs with any grouping),
         per person and view the indices of its boxes there, and their ``(P, S)`` box numbers."""
-        from detector.skeleton_matching import match_heatmaps, members_of, view_members
-
         heat = self.pose.box_heatmaps(list(views), boxes)
         heat.reduce()  # the fusion's per-box softmax, needed whatever groups the boxes: the pose stage's
         t0 = time.perf_counter()
