@@ -7,7 +7,8 @@
 It runs ``service.pipeline.ScenePipeline.run(views)`` (detector mode: no boxes given, the shipped detector and
 pose network) on every frame of the sequences, caching each frame's persons (joints, per-joint spread in mm) in
 ``--detections`` (reused when it exists, so the tracker can be tuned without the networks), then tracks each
-sequence with :class:`posenet.track.Tracker` and prints :func:`posenet.track_eval.evaluate`'s figures (MOTA,
+sequence with :class:`posenet.track.Tracker` (persons the detector was unsure of only continue tracks; ``--set
+unsure_gate_mm=none`` ignores them) and prints :func:`posenet.track_eval.evaluate`'s figures (MOTA,
 IDF1, id switches with a 3D gate; per-frame against smoothed MPJPE; acceleration error; per-track bone-length
 standard deviation; the tracker's milliseconds per frame) against issue 15's goals.
 
@@ -27,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from posenet.data.mvor import MvorDataset, load_annotations
+from posenet.data.mvor import load_annotations
 from posenet.execution import machine_line
 from posenet.track import Tracker, TrackerConfig
 from posenet.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
@@ -35,17 +36,20 @@ from posenet.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, go
 
 def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -> None:
     """Run the pipeline in detector mode on every frame of ``data`` and write one JSON line per frame."""
+    from posenet.predict import read_dataset
     from posenet.scene import views_of
     from service.pipeline import ScenePipeline
 
     pipe = ScenePipeline.from_checkpoints(backend=backend, threads=threads)
-    ds = MvorDataset(data, gt)
+    ds = read_dataset(
+        data, gt, pipe.read_size
+    )  # the views as the service decodes them (tests/test_parity.py)
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out, "w") as f:
         for i in tqdm(range(len(ds)), desc="pipeline", unit="frame"):
             sample = ds[i]
             t0 = time.perf_counter()
-            result = pipe.run(views_of(sample))
+            result = pipe.run(views_of(sample), unsure=True)
             record = {
                 "id": sample.id,
                 "seconds": round(time.perf_counter() - t0, 3),
@@ -54,6 +58,7 @@ def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -
                         "joints": p.joints.round(2).tolist(),
                         "spread_mm": p.spread_mm.round(2).tolist(),
                         "support": p.support,
+                        "unsure": p.unsure,
                     }
                     for p in result.persons
                 ],  # fmt: skip
@@ -65,7 +70,8 @@ def sequences(
     gt: dict, detections: dict[str, dict] | None = None
 ) -> dict[int, list[tuple[str, SequenceFrame]]]:
     """Per sequence, its frames in time order, each ``(frame id, frame)``: ground truth (person ids and joints)
-    and the pipeline's persons (``detections``; none without them, e.g. to score the service's own tracks)."""
+    and the pipeline's persons (``detections``; none without them, e.g. to score the service's own tracks),
+    among them those the detector was unsure of (tracked only with ``TrackerConfig.unsure_gate_mm``)."""
     poses = defaultdict(list)
     for pose in gt["annotations3D"]:
         poses[pose["image_ids"]].append(pose)
@@ -83,6 +89,7 @@ def sequences(
             ),
             joints=np.array([p["joints"] for p in det], float).reshape(-1, 10, 3),
             spread=np.array([p["spread_mm"] for p in det], float).reshape(-1, 10),
+            unsure=np.array([p.get("unsure", False) for p in det], bool),
         )
         out[mv["sequence"]].append((mv["id"], frame))
     for rows in out.values():

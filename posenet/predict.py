@@ -57,10 +57,11 @@ def predict_samples(estimator: PoseEstimator, samples, scenes_per_batch: int = 4
     return preds
 
 
-def read_subsample(annotations: dict, inputs: InputConfig, days=None) -> int:
+def read_subsample(annotations: dict, inputs: InputConfig | tuple[int, int] | None, days=None) -> int:
     """The reader's subsampling that brings an annotation file's views to the resolution the model reads
-    (``InputConfig.read_size``, :func:`posenet.inputs.reduction`), as the service decodes a frame sent at full size;
-    1 for a file without frames. Only the cameras are read: a file without ``annotations3D`` works."""
+    (``InputConfig.read_size``, or a ``(W, H)`` such as ``ScenePipeline.read_size``; :func:`posenet.inputs.reduction`),
+    as the service decodes a frame sent at full size; 1 for a file without frames. Only the cameras are read: a
+    file without ``annotations3D`` works."""
     from posenet.data.mvor import MvorDataset  # the reader pulls in image I/O
 
     if "annotations3D" in annotations:
@@ -69,10 +70,10 @@ def read_subsample(annotations: dict, inputs: InputConfig, days=None) -> int:
     if len(meta) == 0:
         return 1
     W, H = meta[0].views[0].camera.size  # full size (subsample 1)
-    return reduction(W, H, inputs.read_size)
+    return reduction(W, H, inputs.read_size if isinstance(inputs, InputConfig) else inputs)
 
 
-def read_dataset(root, annotations, inputs: InputConfig, days=None):
+def read_dataset(root, annotations, inputs: InputConfig | tuple[int, int] | None, days=None):
     """The ``MvorDataset`` of ``root`` read at the resolution the model reads (:func:`read_subsample`)."""
     from posenet.data.mvor import MvorDataset, load_annotations  # the reader pulls in image I/O
 

@@ -44,7 +44,8 @@ GOALS = {
 class SequenceFrame:
     """One frame of a sequence: its time, the ground truth and the pipeline's persons.
 
-    gt_ids: (G,) person ids; gt_joints: (G, J, 3) mm; joints: (P, J, 3) mm; spread: (P, J) mm.
+    gt_ids: (G,) person ids; gt_joints: (G, J, 3) mm; joints: (P, J, 3) mm; spread: (P, J) mm; unsure: (P,)
+    bool, persons that may only continue a track (``posenet.track.Tracker.update``), or None.
     """
 
     timestamp_s: float
@@ -52,6 +53,7 @@ class SequenceFrame:
     gt_joints: np.ndarray
     joints: np.ndarray
     spread: np.ndarray
+    unsure: np.ndarray | None = None
 
 
 def _bone_std(lengths: dict) -> tuple[list[float], float]:
@@ -91,7 +93,7 @@ def run_tracker(frames: list[SequenceFrame], tracker: Tracker) -> tuple[list[dic
     ms, hyps = [], []
     for fr in frames:
         t0 = time.perf_counter()
-        out = tracker.update(fr.joints, fr.spread, fr.timestamp_s)
+        out = tracker.update(fr.joints, fr.spread, fr.timestamp_s, fr.unsure)
         ms.append((time.perf_counter() - t0) * 1e3)
         hyps.append({p.track_id: p for p in out if p.track_id is not None})
     return hyps, ms

@@ -96,7 +96,9 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
     app.state.pipeline = pipeline
     app.state.in_flight = InFlightLimiter(settings.max_in_flight)
     tracker = TrackerConfig(
-        max_spread_mm=settings.track_max_spread_mm, min_torso_mm=settings.track_min_torso_mm
+        max_spread_mm=settings.track_max_spread_mm,
+        min_torso_mm=settings.track_min_torso_mm,
+        unsure_gate_mm=settings.track_unsure_gate_mm or None,
     )
     app.state.streams = StreamRegistry(
         settings.max_streams, settings.stream_idle_s, lambda: Tracker(tracker), settings.retry_after_s

@@ -25,6 +25,7 @@ import torch
 from detector.skeleton_matching import (
     CANDIDATE_SCORE,
     SkeletonMatchConfig,
+    group_unsure,
     match_heatmaps,
     members_of,
     split_unsure,
@@ -85,6 +86,9 @@ class PersonResult:
         spread_mm: (J,) float, the pose network's per-joint spread in mm (smaller is more certain).
         box_indices: V entries: the indices, among the boxes of that view given to (or found by) the pipeline, of
             the person's boxes there (one, several when the skeleton matcher merged a split person, or none).
+        unsure: every box of this person scored below the detector's threshold: not a person of the frame on
+            its own, listed (after the others) only when :meth:`ScenePipeline.run` is asked for such persons,
+            for a tracker that may continue a track with it (``detector.skeleton_matching.group_unsure``).
     """
 
     id: int
@@ -94,6 +98,7 @@ class PersonResult:
     scores: list[float | None]
     spread_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     box_indices: list[tuple[int, ...]] = field(default_factory=list)
+    unsure: bool = False
 
     @property
     def support(self) -> list[int]:
@@ -250,6 +255,7 @@ class ScenePipeline:
         views: list[SceneView],
         boxes: list[np.ndarray] | None = None,
         person_ids: list[np.ndarray] | None = None,
+        unsure: bool = False,
     ) -> SceneResult:
         """Estimate every person's 3D pose in one frame.
 
@@ -257,6 +263,9 @@ class ScenePipeline:
             views: V views (colour may be None when the pose network does not read it and boxes are given).
             boxes: per view (K_v, 4) xyxy reference boxes; None runs the detector instead.
             person_ids: per view (K_v,) identities of the reference boxes; None groups them with the matcher.
+            unsure: also list, after the frame's persons, those of boxes the detector was unsure of in every
+                view (``PersonResult.unsure``; detector mode with the skeleton matcher and unsure boxes on),
+                for a tracker: they are no persons of the frame on their own.
         """
         if not views:
             raise ValueError("a scene needs at least one view")
@@ -274,13 +283,13 @@ class ScenePipeline:
             raise ValueError(f"boxes has {len(boxes)} entries for {len(views)} views")
         t0 = time.perf_counter()
         limit, why = self._person_limit(len(views))
-        heat, members = None, None
+        heat, members, unsure_groups = None, None, []
         if person_ids is not None:
             ids, groups = group_by_ids(person_ids)
         elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
             boxes, scores, candidate = self._fit_boxes(boxes, scores, limit, why, candidate)
-            heat, timings["match"], groups, members = self._match_skeletons(
-                boxes, views, candidate, detected=scores[0] is not None
+            heat, timings["match"], groups, members, unsure_groups = self._match_skeletons(
+                boxes, views, candidate, detected=scores[0] is not None, unsure=unsure
             )
             timings["pose"] += _ms(t0) - timings["match"]
             ids = list(range(len(groups)))
@@ -295,16 +304,26 @@ class ScenePipeline:
             # Detector mode: the matcher lists multi-view groups first; the best-supported persons are kept.
             ids, groups = ids[:limit], groups[:limit]
             members = None if members is None else members[:limit]
+        if unsure_groups:  # after the frame's persons, within the same limit
+            unsure_groups = unsure_groups[: max(limit - len(groups), 0)]
+            unsure_members = members_of(unsure_groups, boxes)
+            width = max(members.shape[1], unsure_members.shape[1])
+            members = np.concatenate([np.pad(m, ((0, 0), (0, width - m.shape[1])), constant_values=-1)
+                                      for m in (members, unsure_members)])  # fmt: skip
+            ids = ids + list(range(len(groups), len(groups) + len(unsure_groups)))
+            groups = groups + [view_members(g) for g in unsure_groups]
         if heat is None:
             timings["match"] = _ms(t0)
         if heat is None:  # ids and the centre matcher give per view one box index, or -1
             groups = [[() if k < 0 else (k,) for k in group] for group in groups]
+        first_unsure = len(groups) - len(unsure_groups)
         persons = [
             PersonResult(
-                pid, np.zeros(0), np.zeros(0), *self._person_boxes(held, boxes, scores), box_indices=held
+                pid, np.zeros(0), np.zeros(0), *self._person_boxes(held, boxes, scores), box_indices=held,
+                unsure=p >= first_unsure,
             )
-            for pid, held in zip(ids, groups, strict=True)
-        ]
+            for p, (pid, held) in enumerate(zip(ids, groups, strict=True))
+        ]  # fmt: skip
         t0 = time.perf_counter()
         if persons:
             # The skeleton matcher's heatmaps: fuse its groups without another U-Net pass.
@@ -369,13 +388,19 @@ class ScenePipeline:
         return split_unsure(boxes, scores, threshold)
 
     def _match_skeletons(
-        self, boxes: list[np.ndarray], views: list[SceneView], candidate=None, detected: bool = False
+        self,
+        boxes: list[np.ndarray],
+        views: list[SceneView],
+        candidate=None,
+        detected: bool = False,
+        unsure: bool = False,
     ):
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
-        Returns ``(heat, match_ms, groups, members)``: the heatmaps to fuse from, the milliseconds of the
-        association (after the U-Net and each box's softmax moments, which the fusion needs with any grouping),
-        per person and view the indices of its boxes there, and their ``(P, S)`` box numbers."""
+        Returns ``(heat, match_ms, groups, members, unsure_groups)``: the heatmaps to fuse from, the milliseconds
+        of the association (after the U-Net and each box's softmax moments, which the fusion needs with any
+        grouping), per person and view the indices of its boxes there, their ``(P, S)`` box numbers, and with
+        ``unsure`` the groups of the unsure boxes left over (``group_unsure``; else none)."""
         heat = self.pose.box_heatmaps(list(views), boxes)
         heat.reduce()  # the fusion's per-box softmax, needed whatever groups the boxes: the pose stage's
         t0 = time.perf_counter()
@@ -391,7 +416,12 @@ class ScenePipeline:
             candidate=candidate,
             detected=detected,
         )
-        return heat, _ms(t0), [view_members(g) for g in groups], members_of(groups, boxes)
+        left = []
+        if unsure and detected:
+            left = group_unsure(
+                heat, views, boxes, groups, candidate, config, self.config.max_match_combinations
+            )
+        return heat, _ms(t0), [view_members(g) for g in groups], members_of(groups, boxes), left
 
     # ----------------------------------------------------------------------------------------- offline
     def run_sample(self, sample: Sample, reference_boxes: bool = True) -> tuple[SceneResult, list[dict]]:

@@ -239,10 +239,16 @@ def _scene_part(texts: dict[str, bytes]) -> bytes:
 
 
 async def scene_result(
-    request: Request, pipeline: ScenePipeline, scene_text: bytes, files: dict[str, bytes], t_start: float
+    request: Request,
+    pipeline: ScenePipeline,
+    scene_text: bytes,
+    files: dict[str, bytes],
+    t_start: float,
+    unsure: bool = False,
 ) -> tuple[SceneResult, ValidatedScene, float]:
     """Decode and validate a frame's form parts, then run the pipeline on it (called holding an inference slot).
 
+    ``unsure``: also list the persons the detector was unsure of (``ScenePipeline.run``), for a stream's tracker.
     Returns the result, the validated scene and the decoding time in ms (since ``t_start``, a perf_counter).
     """
     settings: Settings = request.app.state.settings
@@ -263,7 +269,7 @@ async def scene_result(
 
     def infer() -> SceneResult:
         try:
-            return pipeline.run(scene.views, scene.boxes, scene.person_ids)
+            return pipeline.run(scene.views, scene.boxes, scene.person_ids, unsure=unsure)
         except InputError:
             raise
         except ValueError as exc:  # the models' own checks on what validation let through
@@ -340,7 +346,9 @@ async def post_stream_frame(
     scene_text = _scene_part(texts)
     timestamp_s = parse_timestamp(texts.get("timestamp_s"))
     async with inference_slot(request, settings), streams.frame(stream_id, timestamp_s, received) as frame:
-        result, scene, decode_ms = await scene_result(request, pipeline, scene_text, files, t_start)
+        result, scene, decode_ms = await scene_result(
+            request, pipeline, scene_text, files, t_start, unsure=bool(settings.track_unsure_gate_mm)
+        )
         body = frame.answer(result, scene, decode_ms, t_start)
     return Response(body, media_type="application/json")
 

@@ -219,6 +219,12 @@ class TrackedPerson(Person):
         "(median joint spread above ORPOSE_TRACK_MAX_SPREAD_MM), or a torso shorter than any adult's "
         "(ORPOSE_TRACK_MIN_TORSO_MM)",
     )
+    unsure: bool = Field(
+        False,
+        description="the detector was unsure of every box of this person (scores below its threshold, from "
+        "ORPOSE_CANDIDATE_SCORE up): such a person is answered only when it continues a track (a person half "
+        "hidden behind a monitor), never on its own (ORPOSE_TRACK_UNSURE_GATE_MM)",
+    )
     smoothed_joints: list[SmoothedJoint] = Field(
         ...,
         description="the 10 joints as the tracker estimates them, in MVOR order (joints holds the raw ones of "

@@ -122,6 +122,16 @@ class Settings(BaseSettings):
         description="persons whose torso (neck to the middle of the hips) is shorter than this many mm are "
         "answered without a track (0 tracks every torso)",
     )
+    # posenet.track.TrackerConfig.unsure_gate_mm: persons of boxes the detector was unsure of in every view
+    # (detector.skeleton_matching.group_unsure) may continue a track this close to it, never start one.
+    track_unsure_gate_mm: float = Field(
+        TrackerConfig.unsure_gate_mm,
+        ge=0,
+        le=2000,
+        description="streams: a person the detector was unsure of in every view (scores from "
+        "ORPOSE_CANDIDATE_SCORE up to its threshold) continues a confirmed track that no other person took "
+        "when it lies within this many mm of it, and is then answered with unsure true (0: never used)",
+    )
     token: SecretStr | None = Field(
         None,
         description="bearer token; when set every route but /health needs it (the docs too, unless "

@@ -225,23 +225,29 @@ class Frame:
         stream = self.stream
         joints = np.array([p.joints for p in result.persons], np.float64).reshape(-1, len(JOINTS), 3)
         spread = np.array([p.spread_mm for p in result.persons], np.float64).reshape(-1, len(JOINTS))
+        unsure = np.array([p.unsure for p in result.persons], bool)
         t_track = time.perf_counter()
-        tracked = stream.tracker.update(joints, spread, self.time)
+        tracked = stream.tracker.update(joints, spread, self.time, unsure)
         track_ms = (time.perf_counter() - t_track) * 1e3
         if stream.clock is None:
             stream.clock, stream.origin = self.clock, self.received
         stream.frames += 1
         stream.last_time = self.time
+        # A person the detector was unsure of is answered only when it continues a track; the persons before it
+        # keep their ids, and those answered after it are numbered on (detector mode's ids are indices).
+        kept = [(person, t, u) for person, t, u in zip(out.persons, tracked, unsure, strict=True)
+                if not u or t.track_id is not None]  # fmt: skip
         persons = [
             TrackedPerson(
-                **person.model_dump(),
+                **{**person.model_dump(), **({"id": i} if u else {})},
                 track_id=t.track_id,
+                unsure=bool(u),
                 smoothed_joints=[
                     SmoothedJoint(name=name, position=[float(x) for x in xyz])
                     for name, xyz in zip(JOINTS, t.joints, strict=True)
                 ],
             )
-            for person, t in zip(out.persons, tracked, strict=True)
+            for i, (person, t, u) in enumerate(kept)
         ]
         body = StreamFrameOut(
             mode=out.mode,

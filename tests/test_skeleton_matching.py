@@ -307,6 +307,13 @@ class MeanFusion:
         joints = (self.joints[members.clamp_min(0)] * used).sum(1) / used.sum(1).clamp_min(1)
         return JointEstimate(joints, torch.zeros(joints.shape[:2]), (members >= 0).any(1))
 
+    def single_view(self):
+        from posenet.lifting import JointEstimate
+
+        return JointEstimate(
+            self.joints, torch.zeros(self.joints.shape[:2]), torch.ones(len(self.joints), dtype=torch.bool)
+        )
+
 
 def _groups(*rows):
     from detector.matching import Group
@@ -384,6 +391,18 @@ def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny
         assert any(s is not None and s >= threshold for s in person.scores)
     plain = sure.run(views)
     assert all(s is None or s >= threshold for p in plain.persons for s in p.scores)
+    # asked for them (a stream's tracker), the persons of unsure boxes alone follow the frame's own, unchanged
+    both = low.run(views, unsure=True)
+    n = len(result.persons)
+    assert [p.unsure for p in both.persons] == [False] * n + [True] * (len(both.persons) - n)
+    for a, b in zip(result.persons, both.persons[:n], strict=True):
+        assert a.box_indices == b.box_indices
+        np.testing.assert_allclose(a.joints, b.joints, atol=0.01)
+    taken = {(v, k) for p in result.persons for v, ks in enumerate(p.box_indices) for k in ks}
+    for p in both.persons[n:]:
+        assert all(s is None or s < threshold for s in p.scores)
+        assert not taken & {(v, k) for v, ks in enumerate(p.box_indices) for k in ks}
+    assert len(both.persons) > n, "the test frame should give a person of unsure boxes alone"
 
 
 def test_association_reads_unsure_detections_as_the_service_does(tiny):
@@ -453,3 +472,39 @@ def test_a_person_one_view_saw_where_another_sees_free_space_is_dropped():
     two = [Group((0, 0), np.zeros(3), 0.0)]
     assert drop_unseen(two, views(wall), boxed, np.stack([person, person]), np.ones((2, 10), bool), 300.0, 6)
     assert drop_unseen(groups, views(wall), no_box, joints, ok, None, 6) == groups
+
+
+def test_unsure_boxes_left_over_are_grouped_for_a_tracker():
+    """Step 8: the unsure boxes no person took are grouped among themselves (a person unsure in both views is
+    one), one that another view should have seen in free space is dropped, and sure or admitted boxes are never
+    reused."""
+    from detector.matching import Group
+    from detector.skeleton_matching import group_unsure
+    from posenet.cameras import Camera
+    from posenet.scene import SceneView
+
+    W, H = 320, 240
+    cam = Camera.create(200.0, 200.0, (W - 1) / 2, (H - 1) / 2, size=(W, H))
+    A, B, C = (TEMPLATE + [x, 300, 3000] for x in (-900, 300, 1400))  # (J, 3) mm, in front of a wall at 6 m
+
+    def box(person):
+        uv = cam.project(torch.as_tensor(person, dtype=cam.K.dtype)).numpy()
+        return np.concatenate([uv.min(0) - 5, uv.max(0) + 5])
+
+    # view 0: A (sure), B (unsure), C (unsure); view 1 (the same camera): A (sure), B (unsure)
+    boxes = [np.stack([box(A), box(B), box(C)]), np.stack([box(A), box(B)])]
+    joints = np.stack([A, B, C, A, B])
+    wall = np.full((H, W), 6000, np.uint16)
+    views = [SceneView(None, wall, cam), SceneView(None, wall, cam)]
+    candidate = [np.array([False, True, True]), np.array([False, True])]
+    persons = [Group((0, 0), np.zeros(3), 0.0)]
+    unsure = group_unsure(MeanFusion(joints), views, boxes, persons, candidate)
+    # B in both views; C, seen by view 0 only, lies in free space before view 1's wall with no box there: nobody
+    assert [g.indices for g in unsure] == [(1, 1)]
+    # B's box in view 1 was admitted to a person: only view 0's B is left, and view 1 has a box over it
+    taken = [Group((0, 0), np.zeros(3), 0.0), Group((-1, 1), np.zeros(3), 0.0)]
+    assert [g.indices for g in group_unsure(MeanFusion(joints), views, boxes, taken, candidate)] == [(1, -1)]
+    assert group_unsure(MeanFusion(joints), views, boxes, persons, None) == []
+    assert (
+        group_unsure(MeanFusion(joints), views, boxes, persons, [np.zeros_like(c) for c in candidate]) == []
+    )

@@ -93,6 +93,7 @@ def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequ
             assert out["mode"] == "reference_boxes" and out["timings"]["track"] >= 0
             for p in out["persons"]:
                 assert [j["name"] for j in p["smoothed_joints"]] == list(JOINTS)
+                assert p["unsure"] is False  # reference boxes: nobody the detector was unsure of
         # Tracks are confirmed at the third consecutive frame; from then on each person keeps its own id.
         assert set(track_of(answers[0]).values()) == {None}
         ids = [track_of(out) for out in answers[2:]]

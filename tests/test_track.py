@@ -89,6 +89,51 @@ def test_a_one_frame_ghost_and_a_duplicate_never_get_an_id():
     assert tracker.next_id == 1
 
 
+def test_an_unsure_person_continues_a_track_but_never_starts_one():
+    """Persons the detector was unsure of come second: one keeps its confirmed track (a person half behind a
+    monitor), one near a track that a sure person took gets none, and alone they never make a track."""
+    truth = trajectories(2, 40)
+    rng = np.random.default_rng(0)
+    spread = np.full((2, NUM_JOINTS), SPREAD_PER_NOISE * 30.0)
+    tracker = Tracker()
+    ids = []
+    for f in range(40):
+        obs = truth[:, f] + rng.normal(0, 30.0, (2, NUM_JOINTS, 3))
+        out = tracker.update(
+            obs, spread, f / FPS, np.array([False, f >= 10])
+        )  # person 1 unsure from frame 10
+        ids.append([p.track_id for p in out])
+    assert all(i == ids[5] for i in ids[5:]) and None not in ids[5], ids  # both keep their ids throughout
+    assert tracker.next_id == 2
+    # an unsure second detection of a tracked person: the sure one takes the track, the unsure one gets none
+    obs = truth[0, 0][None] + [[[0.0, 0, 0]], [[60.0, 0, 0]]]
+    twice = Tracker()
+    for f in range(5):
+        out = twice.update(obs + [f * 10.0, 0, 0], spread, f / FPS, np.array([False, True]))
+    assert out[0].track_id == 0 and out[1].track_id is None and twice.num_tracks == 1
+    # nor does it keep a neighbour's track alive: B (40 cm from A) is gone, and an unsure skeleton between them,
+    # 15 cm from where B was and 25 cm from A, is A seen again
+    pair = Tracker()
+    A, B = truth[0, 0], truth[0, 0] + [400.0, 0, 0]
+    for f in range(4):
+        out = pair.update(np.stack([A, B]), spread, f / FPS)
+    assert [p.track_id for p in out] == [0, 1]
+    out = pair.update(np.stack([A, A + [250.0, 0, 0]]), spread, 4 / FPS, np.array([False, True]))
+    assert [p.track_id for p in out] == [0, None]
+    # unsure persons alone never start a track
+    alone = Tracker()
+    for f in range(10):
+        out = alone.update(truth[:, f], spread, f / FPS, np.ones(2, bool))
+        assert [p.track_id for p in out] == [None, None] and alone.num_tracks == 0
+    # a mask of no unsure persons is the tracker without one
+    a, b = Tracker(), Tracker()
+    for f in range(12):
+        x = a.update(truth[:, f], spread, f / FPS)
+        y = b.update(truth[:, f], spread, f / FPS, np.zeros(2, bool))
+        assert [p.track_id for p in x] == [p.track_id for p in y]
+        np.testing.assert_array_equal(np.array([p.joints for p in x]), np.array([p.joints for p in y]))
+
+
 def test_a_folded_skeleton_is_never_tracked_and_a_whole_one_is():
     """A skeleton whose torso is shorter than any adult's (the pose network's guess at the draped patient) gets no
     track, however steady; the same skeleton unfolded does."""
@@ -226,3 +271,24 @@ def test_tracks_made_elsewhere_score_as_the_tracker_s_own():
     }
     with pytest.raises(ValueError, match="39 frames of tracks for 40"):
         score(frames, served[1:], ms[1:])
+
+
+def test_the_smoothing_bound_reads_a_known_offset_and_averages_noise(monkeypatch):
+    """benchmarks/smoothing_bound.py: with each track's raw joints the truth plus a constant offset, the oracle
+    (the track's mean error removed) leaves nothing; with white noise on a still person, a longer centred mean
+    does better than a shorter one, and both better than the raw joints."""
+    import sys
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    sys.modules.pop("smoothing_bound", None)
+    from smoothing_bound import ratios
+
+    truth = trajectories(1, 40)[0]  # (N, J, 3) walking
+    offset = [(x + [30.0, -20, 10], x + [30.0, -20, 10], x) for x in truth]
+    assert ratios({(1, 0): offset})["oracle: each track's mean error removed"] < 1e-9
+    rng = np.random.default_rng(0)
+    still = [(truth[0] + rng.normal(0, 30, truth[0].shape), truth[0], truth[0]) for _ in range(60)]
+    r = ratios({(1, 0): still})
+    assert r["raw joints"] == 1.0 and r["the service's smoothed joints (causal)"] == 0.0
+    assert r["centred mean of 15 frames"] < r["centred mean of 3 frames"] < 0.8
