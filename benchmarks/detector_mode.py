@@ -39,9 +39,10 @@ from tqdm import tqdm
 
 from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig
 from posenet.boxes import ground_truth_ids
-from posenet.data.mvor import MvorDataset, image_day, load_annotations
+from posenet.data.mvor import image_day, load_annotations
 from posenet.evaluate import evaluate, prediction_record
 from posenet.execution import machine_line
+from posenet.predict import read_dataset
 from posenet.scene import views_of
 from service.pipeline import PipelineConfig, ScenePipeline
 
@@ -142,8 +143,10 @@ def main(argv: list[str] | None = None) -> dict:
     args = p.parse_args(argv)
     gt = load_annotations(args.annotations or args.data / "annotations.json")
     days = args.days or sorted({image_day(mv["images"][0]) for mv in gt["multiview_images"]})
-    ds = MvorDataset(args.data, gt, 1, ("color", "depth"), days=days)
     pipe = ScenePipeline.from_checkpoints(backend="auto", threads=args.threads)
+    # The views as the service decodes them (at the networks' read size, tests/test_parity.py): the detector then
+    # sees the pixels it sees when served, and the figures are the served ones.
+    ds = read_dataset(args.data, gt, pipe.read_size, days)
     default = SkeletonMatchConfig()
     lowest = min([pipe.detector.cfg.score_threshold] + [v[0] for v in VARIANTS.values() if v[0] is not None])
     pipes = {}

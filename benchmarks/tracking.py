@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from posenet.data.mvor import load_annotations
+from posenet.data.mvor import load_annotations, room_up
 from posenet.execution import machine_line
 from posenet.track import Tracker, TrackerConfig
 from posenet.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
@@ -72,6 +72,7 @@ def sequences(
     """Per sequence, its frames in time order, each ``(frame id, frame)``: ground truth (person ids and joints)
     and the pipeline's persons (``detections``; none without them, e.g. to score the service's own tracks),
     among them those the detector was unsure of (tracked only with ``TrackerConfig.unsure_gate_mm``)."""
+    up = room_up(gt)  # as the client sends it
     poses = defaultdict(list)
     for pose in gt["annotations3D"]:
         poses[pose["image_ids"]].append(pose)
@@ -90,6 +91,7 @@ def sequences(
             joints=np.array([p["joints"] for p in det], float).reshape(-1, 10, 3),
             spread=np.array([p["spread_mm"] for p in det], float).reshape(-1, 10),
             unsure=np.array([p.get("unsure", False) for p in det], bool),
+            up=up,
         )
         out[mv["sequence"]].append((mv["id"], frame))
     for rows in out.values():

@@ -45,7 +45,8 @@ class SequenceFrame:
     """One frame of a sequence: its time, the ground truth and the pipeline's persons.
 
     gt_ids: (G,) person ids; gt_joints: (G, J, 3) mm; joints: (P, J, 3) mm; spread: (P, J) mm; unsure: (P,)
-    bool, persons that may only continue a track (``posenet.track.Tracker.update``), or None.
+    bool, persons that may only continue a track (``posenet.track.Tracker.update``), or None; up: (3,) the
+    room's up direction in the joints' frame, or None.
     """
 
     timestamp_s: float
@@ -54,6 +55,7 @@ class SequenceFrame:
     joints: np.ndarray
     spread: np.ndarray
     unsure: np.ndarray | None = None
+    up: np.ndarray | None = None
 
 
 def _bone_std(lengths: dict) -> tuple[list[float], float]:
@@ -93,7 +95,7 @@ def run_tracker(frames: list[SequenceFrame], tracker: Tracker) -> tuple[list[dic
     ms, hyps = [], []
     for fr in frames:
         t0 = time.perf_counter()
-        out = tracker.update(fr.joints, fr.spread, fr.timestamp_s, fr.unsure)
+        out = tracker.update(fr.joints, fr.spread, fr.timestamp_s, fr.unsure, fr.up)
         ms.append((time.perf_counter() - t0) * 1e3)
         hyps.append({p.track_id: p for p in out if p.track_id is not None})
     return hyps, ms

@@ -98,6 +98,7 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
     tracker = TrackerConfig(
         max_spread_mm=settings.track_max_spread_mm,
         min_torso_mm=settings.track_min_torso_mm,
+        min_height_mm=settings.track_min_height_mm,
         unsure_gate_mm=settings.track_unsure_gate_mm or None,
     )
     app.state.streams = StreamRegistry(

@@ -91,7 +91,10 @@ def scene_request(sample: Sample, root: Path, reference_boxes: bool) -> tuple[di
         depth = root / depth_file_name(view.file_name)
         files.append((f"color_{i}", (color.name, color.read_bytes(), "image/png")))
         files.append((f"depth_{i}", (depth.name, depth.read_bytes(), "image/png")))
-    return {"views": views}, files
+    scene = {"views": views}
+    if sample.up is not None:  # the file knows the room: streams leave lying persons untracked
+        scene["up"] = sample.up.tolist()
+    return scene, files
 
 
 def _backoff(cfg: ClientConfig, attempt: int, retry_after: str | None) -> float:

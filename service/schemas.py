@@ -122,6 +122,12 @@ class SceneIn(BaseModel):
         description="the views (1 to the server's ORPOSE_MAX_VIEWS), in the order of their file parts",
         json_schema_extra={"minItems": 1},
     )
+    up: Vector3 | None = Field(
+        None,
+        description="optional: the room's up direction (towards the ceiling) in the reference frame, any length "
+        "(e.g. the z axis of MVOR's firstCamToRoomRef in camera 0's frame). Streams then leave persons lying down "
+        "(the patient on the table) without a track (ORPOSE_TRACK_MIN_HEIGHT_MM); POST /scenes does not use it",
+    )
 
 
 # ----------------------------------------------------------------------------------------------- response

@@ -122,6 +122,15 @@ class Settings(BaseSettings):
         description="persons whose torso (neck to the middle of the hips) is shorter than this many mm are "
         "answered without a track (0 tracks every torso)",
     )
+    # posenet.track.TrackerConfig.min_height_mm: with the room's up direction sent in the scene ("up"), a skeleton
+    # spanning less than this along it lies down (on rendered sequences, the patient on the table).
+    track_min_height_mm: float = Field(
+        TrackerConfig.min_height_mm,
+        ge=0,
+        le=2000,
+        description="streams, for scenes that give the room's up direction: persons whose skeleton spans less "
+        "than this many mm along it (lying down, e.g. the patient) are answered without a track (0 tracks all)",
+    )
     # posenet.track.TrackerConfig.unsure_gate_mm: persons of boxes the detector was unsure of in every view
     # (detector.skeleton_matching.group_unsure) may continue a track this close to it, never start one.
     track_unsure_gate_mm: float = Field(

@@ -227,7 +227,7 @@ class Frame:
         spread = np.array([p.spread_mm for p in result.persons], np.float64).reshape(-1, len(JOINTS))
         unsure = np.array([p.unsure for p in result.persons], bool)
         t_track = time.perf_counter()
-        tracked = stream.tracker.update(joints, spread, self.time, unsure)
+        tracked = stream.tracker.update(joints, spread, self.time, unsure, scene.up)
         track_ms = (time.perf_counter() - t_track) * 1e3
         if stream.clock is None:
             stream.clock, stream.origin = self.clock, self.received

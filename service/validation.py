@@ -49,6 +49,7 @@ class ValidatedScene:
             image), or None: the response reports these.
         reduced: per view the factor k its images were decoded smaller by (1: as sent). ``views`` and
             ``boxes`` are in those reduced pixels (u' = (u + 0.5) / k - 0.5, as ``Camera.scale``).
+        up: (3,) unit vector, the room's up direction in the reference frame, or None (not sent).
     """
 
     views: list[SceneView]
@@ -56,6 +57,7 @@ class ValidatedScene:
     person_ids: list[np.ndarray] | None
     sent_boxes: list[np.ndarray] | None = None
     reduced: list[int] | None = None
+    up: np.ndarray | None = None
 
 
 def parse_scene(text: str | bytes, limits: Limits) -> SceneIn:
@@ -241,9 +243,25 @@ def _validated(
             "every depth image holds only 0 (unknown), so no person can be lifted to 3D: send the sensor's "
             "16-bit depth in mm (check that the depth files are not blank and depth_scale_mm is right)"
         )
+    up = _up(scene.up)
     if not reference_mode:
-        return ValidatedScene(views, None, None, reduced=reduced)
+        return ValidatedScene(views, None, None, reduced=reduced, up=up)
     has_ids = any(ids is not None for ids in all_ids)
     ids = [np.zeros(0, np.int64) if x is None else x for x in all_ids] if has_ids else None
     sent = [np.asarray(v.boxes or [], dtype=np.float64).reshape(-1, 4) for v in scene.views]
-    return ValidatedScene(views, all_boxes, ids, sent, reduced)
+    return ValidatedScene(views, all_boxes, ids, sent, reduced, up)
+
+
+def _up(up: list[float] | None) -> np.ndarray | None:
+    """The scene's ``up`` as a unit vector; 422 when it has no direction."""
+    if up is None:
+        return None
+    v = np.asarray(up, np.float64)  # finite: SceneIn refuses inf and NaN
+    scale = float(np.abs(v).max())
+    if not scale > 0:
+        raise InputError(
+            f"up {up} has no direction: give the room's up direction (towards the ceiling) in the reference "
+            "frame as three numbers, not all 0 (e.g. [0, -1, 0] for a level camera 0), or leave it out"
+        )
+    v = v / scale  # no overflow or underflow in the norm
+    return v / np.linalg.norm(v)

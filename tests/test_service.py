@@ -293,6 +293,7 @@ def bad_requests(tiny):
         ("image over ORPOSE_MAX_IMAGE_PIXELS", form(f=with_parts(depth_0=("d.png", huge))), 413,
          "more than the limit"),
         ("unknown scene field", form({**scene, "colour": 1}), 422, "Extra inputs are not permitted"),
+        ("up [0, 0, 0]", form({**scene, "up": [0, 0, 0]}), 422, "has no direction"),
     ]  # fmt: skip
 
 

@@ -110,6 +110,30 @@ def test_valid_scene_gives_views_and_boxes():
     assert scene.views[1].camera.size == (W, H)
     assert scene.boxes[1].tolist() == [[1, 2, 30, 40]] and scene.person_ids[1].tolist() == [7]
     assert validate([{"camera": camera()}], parts(1)).boxes is None  # no boxes anywhere: detector mode
+    assert scene.up is None
+
+
+def test_up_is_a_unit_direction_or_named():
+    """The scene's optional up direction comes back as a unit vector, however long or tiny it was sent; one with
+    no direction is a 422 that says so."""
+    views = [{"camera": camera()}]
+    for up, unit in (
+        ([0, -2, 0], [0, -1, 0]),
+        ([3e-300, 4e-300, 0], [0.6, 0.8, 0]),
+        ([1e308, 1e308, 0], None),
+    ):
+        got = validate_scene(
+            parse_scene(json.dumps({"views": views, "up": up}), LIMITS), parts(1), LIMITS, True
+        ).up
+        assert np.linalg.norm(got) == pytest.approx(1.0)
+        if unit is not None:
+            np.testing.assert_allclose(got, unit, atol=1e-12)
+    with pytest.raises(InputError, match="has no direction"):
+        validate_scene(
+            parse_scene(json.dumps({"views": views, "up": [0, 0, 0]}), LIMITS), parts(1), LIMITS, True
+        )
+    with pytest.raises(InputError, match="up"):
+        parse_scene(json.dumps({"views": views, "up": [0, 1]}), LIMITS)
 
 
 @pytest.mark.parametrize(

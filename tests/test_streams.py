@@ -62,6 +62,7 @@ def server(tmp_path_factory):
         # Tiny random-init weights: their skeletons are wide spreads with folded torsos, tracked all the same.
         "ORPOSE_TRACK_MAX_SPREAD_MM": "5000",
         "ORPOSE_TRACK_MIN_TORSO_MM": "0",
+        "ORPOSE_TRACK_MIN_HEIGHT_MM": "0",  # and any height (the client sends the rendered room's up)
     }
     with Server(env) as url, httpx.Client(base_url=url, headers=AUTH, timeout=60) as client:
         yield client

@@ -134,6 +134,25 @@ def test_an_unsure_person_continues_a_track_but_never_starts_one():
         np.testing.assert_array_equal(np.array([p.joints for p in x]), np.array([p.joints for p in y]))
 
 
+def test_a_person_lying_down_is_not_tracked_when_the_room_s_up_is_known():
+    """With the room's up direction, a skeleton lying flat (the patient on the table) gets no track, however
+    steady and whole its torso; without it, or standing, it does."""
+    from posenet.track import skeleton_height
+
+    truth = trajectories(1, 12)[0]  # (F, J, 3) standing, z up
+    up = np.array([0.0, 0.0, 3.0])  # any length
+    flat = TEMPLATE[:, [2, 1, 0]]  # turned about the y axis: head to feet along x, flat in z
+    lying = flat[None] + truth.mean(1, keepdims=True) - flat.mean(0)  # (F, J, 3) where the walker is
+    assert (skeleton_height(truth, up) > 500).all() and (skeleton_height(lying, up) < 200).all()
+    assert (torso_length(lying) > TrackerConfig().min_torso_mm).all()
+    spread = np.full((1, NUM_JOINTS), 30.0)
+    for skeletons, given, tracked in ((lying, up, False), (lying, None, True), (truth, up, True)):
+        tracker = Tracker()
+        for f in range(12):
+            out = tracker.update(skeletons[f][None], spread, f / FPS, up=given)
+        assert (out[0].track_id is not None) == tracked
+
+
 def test_a_folded_skeleton_is_never_tracked_and_a_whole_one_is():
     """A skeleton whose torso is shorter than any adult's (the pose network's guess at the draped patient) gets no
     track, however steady; the same skeleton unfolded does."""

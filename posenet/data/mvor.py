@@ -57,6 +57,19 @@ def read_annotation_json(path: str | Path) -> dict:
         return json.load(f)
 
 
+def room_up(annotations: dict) -> np.ndarray | None:
+    """The room's up direction, a unit (3,), in camera 0's frame (where MVOR's 3D poses lie): the z axis of MVOR's
+    room frame, ``cameras_info.camParams.firstCamToRoomRef`` = T(cam0 -> room) (in the real file a standing
+    person's head lies ~0.55 m above their hips along it). None when the file has no room frame."""
+    params = annotations.get("cameras_info", {}).get("camParams", {})
+    T = params.get("firstCamToRoomRef")
+    if T is None:
+        return None
+    R = np.asarray(T, np.float64).reshape(4, 4)[:3, :3]
+    up = R.T @ np.array([0.0, 0.0, 1.0])  # room z expressed in camera 0's axes
+    return up / np.linalg.norm(up)
+
+
 def load_annotations(path: str | Path, poses: bool = True) -> dict:
     """Read and check an MVOR-format annotation json (ValueError naming the file and the missing keys).
 
@@ -226,6 +239,7 @@ class MvorDataset(torch.utils.data.Dataset):
             raise FileNotFoundError(f"dataset root {self.root} is not a folder")
 
         self.cameras = Camera.from_mvor(self.annotations["cameras_info"])
+        self.up = room_up(self.annotations)
         self._frames = self._index(self.annotations)
         all_days = sorted({f.day for f in self._frames})
         if days is not None:
@@ -332,4 +346,5 @@ class MvorDataset(torch.utils.data.Dataset):
             valid=frame.valid.copy(),
             person_ids=frame.person_ids.copy(),
             support=frame.support.copy(),
+            up=None if self.up is None else self.up.copy(),
         )

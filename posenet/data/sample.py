@@ -64,6 +64,8 @@ class Sample:
         valid: (N, J) bool, joints annotated (MVOR flag > 0).
         person_ids: (N,) int64 person id of each pose (matches ``View.box_person_ids``).
         support: (N,) int64 number of views in which that person has a box.
+        up: (3,) unit vector, the room's up direction (towards the ceiling) in the reference frame, when the
+            annotation file knows the room (MVOR's ``firstCamToRoomRef``); else None.
     """
 
     id: str
@@ -73,6 +75,7 @@ class Sample:
     valid: np.ndarray = field(default_factory=lambda: np.zeros((0, 10), bool))
     person_ids: np.ndarray = field(default_factory=lambda: np.zeros((0,), np.int64))
     support: np.ndarray = field(default_factory=lambda: np.zeros((0,), np.int64))
+    up: np.ndarray | None = None
 
     @property
     def cameras(self) -> Camera:
