@@ -21,15 +21,12 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 from scipy.signal import savgol_filter
-from tracking import sequences, served_tracks
+from tracking import sequences, served_pairs, served_tracks
 
 from posenet.data.mvor import load_annotations
 from posenet.execution import machine_line
-from posenet.track import mean_joint_distance
 
-GATE_MM = 500.0
 MEANS = (3, 5, 9, 15)
 SAVGOL = ((9, 2), (15, 2), (31, 2))
 
@@ -40,15 +37,8 @@ def paired_tracks(gt: dict, lines: dict) -> dict[tuple[int, int], list[tuple]]:
     for seq, rows in sequences(gt).items():
         for frame_id, frame in rows:
             tracks, _ = served_tracks(lines, frame_id)
-            if not tracks or not len(frame.gt_ids):
-                continue
-            ids = list(tracks)
-            smoothed = np.array([tracks[t].joints for t in ids])
-            dist = mean_joint_distance(frame.gt_joints, smoothed)  # (G, T)
-            for g, t in zip(*linear_sum_assignment(np.where(dist <= GATE_MM, dist, 1e9)), strict=True):
-                if dist[g, t] <= GATE_MM:
-                    track = tracks[ids[t]]
-                    out[(seq, ids[t])].append((track.raw, track.joints, frame.gt_joints[g]))
+            for g, t in served_pairs(frame, tracks):
+                out[(seq, t)].append((tracks[t].raw, tracks[t].joints, frame.gt_joints[g]))
     return out
 
 

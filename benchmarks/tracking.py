@@ -26,11 +26,12 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 from tqdm import tqdm
 
 from posenet.data.mvor import load_annotations, room_up
 from posenet.execution import machine_line
-from posenet.track import Tracker, TrackerConfig
+from posenet.track import Tracker, TrackerConfig, mean_joint_distance
 from posenet.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
 
 
@@ -116,6 +117,19 @@ def served_tracks(lines: dict[str, dict], frame_id: str) -> tuple[dict[int, Trac
             smooth = np.array([j["position"] for j in p["smoothed_joints"]], float)
             tracks[int(p["track_id"])] = TrackedPerson(int(p["track_id"]), raw, smooth)
     return tracks, float(response.get("timings", {}).get("track", float("nan")))
+
+
+def served_pairs(
+    frame: SequenceFrame, tracks: dict[int, TrackedPerson], gate_mm: float = 500.0
+) -> list[tuple]:
+    """One frame's (ground-truth index, track id) pairs: the optimal assignment on the mean joint distance between
+    the ground truth and the tracks' smoothed joints, pairs beyond ``gate_mm`` left out (``track_eval``'s gate)."""
+    if not tracks or not len(frame.gt_ids):
+        return []
+    ids = list(tracks)
+    dist = mean_joint_distance(frame.gt_joints, np.array([tracks[t].joints for t in ids]))  # (G, T)
+    rows, cols = linear_sum_assignment(np.where(dist <= gate_mm, dist, 1e9))
+    return [(int(g), ids[t]) for g, t in zip(rows, cols, strict=True) if dist[g, t] <= gate_mm]
 
 
 def main(argv: list[str] | None = None) -> dict:

@@ -54,6 +54,7 @@ _B = np.array([b for _, b in BONES])
 RELAXATION = 0.5
 _TO_A = np.eye(NUM_JOINTS)[:, _A]  # (J, B): bone b starts at joint j
 _TO_B = np.eye(NUM_JOINTS)[:, _B]
+_BONE_OF = np.eye(NUM_JOINTS)[_B] - np.eye(NUM_JOINTS)[_A]  # (B, J): bone b = joint B[b] - joint A[b]
 
 
 @dataclass
@@ -174,25 +175,25 @@ def project_bones(
         joints: (T, J, 3) mm; prior: (T, B) mm (NaN: no prior, that bone is left alone); variance: (T, J) mm^2,
             how freely each joint may move (a bone's correction is shared between its ends in this proportion).
     Jacobi passes: every bone's correction is computed at once and each joint moves by half the sum of its
-    bones' (the half keeps a joint shared by three bones from overshooting).
+    bones' (the half keeps a joint shared by three bones from overshooting). Each pass is two small products:
+    the bones from the joints, and the joints' moves from the bones' corrections (half the time of gathers).
     """
     if joints.ndim != 3 or joints.shape[1:] != (NUM_JOINTS, 3):
         raise ValueError(f"joints must be (T, {NUM_JOINTS}, 3), got {joints.shape}")
     x = joints.copy()
     wa = variance[:, _A] / np.maximum(variance[:, _A] + variance[:, _B], 1e-9)  # (T, B)
+    # (T, J, B): how joint j moves with bone b's step, its start by wa of it, its end by -(1 - wa)
+    move = _TO_A[None] * wa[:, None, :] - _TO_B[None] * (1 - wa)[:, None, :]
     known = np.isfinite(prior)
     target = np.where(known, prior, 0.0)
     for _ in range(iterations):
-        d = x[:, _B] - x[:, _A]  # (T, B, 3)
+        d = _BONE_OF @ x  # (T, B, 3)
         length = np.maximum(np.sqrt((d * d).sum(-1)), 1e-6)  # (T, B)
         excess = length - target
-        err = np.where(known, excess - np.minimum(np.maximum(excess, -tolerance), tolerance), 0.0)
+        err = np.where(known, excess - np.clip(excess, -tolerance, tolerance), 0.0)
         if not err.any():
             break
-        step = (RELAXATION * err / length)[
-            ..., None
-        ] * d  # (T, B, 3) shortens (err > 0) or lengthens the bone
-        x += _TO_A @ (wa[..., None] * step) - _TO_B @ ((1 - wa)[..., None] * step)  # (J, B) @ (T, B, 3)
+        x += move @ ((RELAXATION * err / length)[..., None] * d)  # shortens (err > 0) or lengthens each bone
     return x
 
 
@@ -215,7 +216,10 @@ def robust_prior(
     ``template_frames`` measured frames (inf: the scaled template alone). The person's scale is the median over
     frames of each frame's median over bones of length / template, pulled towards 1 (the average adult) with the
     weight of ``scale_prior_frames`` frames. NaN where fewer than ``min_count`` lengths of a bone are known."""
-    median, count = _median(history, 1)  # (T, B)
+    if math.isinf(template_frames):  # the scaled template alone: only how many lengths are known matters
+        median, count = None, np.isfinite(history).sum(1)  # (T, B)
+    else:
+        median, count = _median(history, 1)  # (T, B)
     if template_frames > 0:
         template = np.asarray(BONE_TEMPLATE_MM)
         per_frame, _ = _median(history / template, 2)  # (T, H) each frame's scale
@@ -224,8 +228,11 @@ def robust_prior(
             frames + scale_prior_frames, 1e-9
         )
         scaled = scale[:, None] * template
-        w = 1.0 if math.isinf(template_frames) else template_frames / (count + template_frames)
-        median = np.where(count > 0, w * scaled + (1 - w) * np.nan_to_num(median), scaled)
+        if median is None:
+            median = scaled
+        else:
+            w = template_frames / (count + template_frames)
+            median = np.where(count > 0, w * scaled + (1 - w) * np.nan_to_num(median), scaled)
     return np.where(count >= max(min_count, 1), median, np.nan)
 
 
