@@ -478,9 +478,10 @@ def seen_from(
     is at most ``free_mm`` short of the point's own depth: no surface hides it. Pixels without depth say
     nothing."""
     camera = view.camera
-    p = torch.as_tensor(np.asarray(points, np.float64).reshape(-1, 3), dtype=camera.K.dtype)
-    z = camera.to_camera(p)[:, 2].numpy()  # (K,)
-    uv = camera.project(p).numpy()  # (K, 2)
+    p = torch.as_tensor(np.asarray(points, np.float64).reshape(-1, 3), dtype=camera.intrinsics.dtype)
+    in_camera = camera.to_camera(p)  # (K, 3)
+    z = in_camera[:, 2].numpy()  # (K,)
+    uv = camera.project_camera(in_camera).numpy()  # (K, 2)
     h, w = view.depth.shape
     with np.errstate(invalid="ignore"):
         inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
