@@ -210,8 +210,10 @@ def test_pipeline_with_the_skeleton_matcher(tiny):
         evaluate_association(tiny[1], matcher="skeletons", progress=False)
     # A sweep scores every config from the same heatmaps: each row equals a run with that config alone.
     configs = [
-        SkeletonMatchConfig(threshold_mm=t, same_view_mm=s) for t in (1.0, 600.0) for s in (1.0, 250.0)
-    ]
+        SkeletonMatchConfig(threshold_mm=t, same_view_mm=s)
+        for t in (1.0, 600.0)
+        for s in (1.0, SkeletonMatchConfig().same_view_mm)
+    ]  # the last is the default
     rows = evaluate_association(
         tiny[1], matcher="skeletons", pose=est, skeleton_configs=configs, progress=False
     )
