@@ -85,6 +85,29 @@ def track_of(out: dict) -> dict[int, int | None]:
 
 
 # ----------------------------------------------------------------------------------------------- tracking
+def test_the_room_s_up_reaches_the_tracker(tmp_path_factory, sequence):
+    """The client sends the rendered room's up with each frame; with ORPOSE_TRACK_MIN_HEIGHT_MM above any
+    skeleton's height along it nobody gets a track, and the same frames without "up" are tracked."""
+    env = {
+        **reference_box_env(tmp_path_factory.mktemp("ckpt_up")),
+        "ORPOSE_TRACK_MAX_SPREAD_MM": "5000",
+        "ORPOSE_TRACK_MIN_TORSO_MM": "0",
+        "ORPOSE_TRACK_MIN_HEIGHT_MM": "2000",
+    }
+    assert sequence.ds[0].up is not None
+    with Server(env) as url, httpx.Client(base_url=url, timeout=60) as client:
+        for stream, keep_up in (("with-up", True), ("without-up", False)):
+            for k, t in enumerate(sequence.times):
+                form = sequence.form(k, t)
+                scene = json.loads(form["data"]["scene"])
+                assert "up" in scene
+                if not keep_up:
+                    form["data"]["scene"] = json.dumps({"views": scene["views"]})
+                out = ok(client.post(f"/streams/{stream}/frames", **form))
+            tracked = {i for i in track_of(out).values() if i is not None}
+            assert bool(tracked) == (not keep_up), (stream, track_of(out))
+
+
 def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequence):
     answers = [ok(frame(server, "seq-a", sequence, k, t)) for k, t in enumerate(sequence.times)]
     try:
