@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.signal import savgol_filter
-from tracking import sequences, served_pairs, served_tracks
+from tracking import sequences, served_lines, served_pairs, served_tracks
 
 from posenet.data.mvor import load_annotations
 from posenet.execution import machine_line
@@ -78,9 +78,7 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--json", type=Path, help="also write the figures here")
     args = p.parse_args(argv)
     gt = load_annotations(args.data / "annotations.json")
-    with open(args.served) as f:
-        lines = {r["id"]: r for r in (json.loads(t) for t in f if t.strip())}
-    tracks = paired_tracks(gt, lines)
+    tracks = paired_tracks(gt, served_lines(args.served))
     figures = ratios(tracks)
     print(f"{args.data}: {sum(len(v) for v in tracks.values())} person-frames on {len(tracks)} tracks, "
           f"raw MPJPE {figures['raw MPJPE cm']:.2f} cm")  # fmt: skip

@@ -15,14 +15,13 @@ and those covered by unsure persons.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from tracking import sequences, served_pairs, served_tracks  # noqa: E402
+from tracking import sequences, served_lines, served_pairs, served_tracks  # noqa: E402
 
 from posenet.data.mvor import load_annotations  # noqa: E402
 
@@ -63,9 +62,7 @@ def main(argv: list[str] | None = None) -> None:
     sequence = args.sequence if args.sequence is not None else min(sequences(gt))
     runs = []
     for path, label in zip(args.served, labels, strict=True):
-        with open(path) as f:
-            lines = {r["id"]: r for r in (json.loads(t) for t in f if t.strip())}
-        cover = coverage(gt, lines, sequence)
+        cover = coverage(gt, served_lines(path), sequence)
         covered = sum(isinstance(t, int) for row in cover.values() for t, _ in row)
         unsure = sum(u for row in cover.values() for _, u in row)
         total = sum(t is not None for row in cover.values() for t, _ in row)

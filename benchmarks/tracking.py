@@ -32,7 +32,7 @@ from tqdm import tqdm
 from posenet.data.mvor import load_annotations, room_up
 from posenet.execution import machine_line
 from posenet.track import Tracker, TrackerConfig, mean_joint_distance
-from posenet.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
+from posenet.track_eval import GATE_MM, GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
 
 
 def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -> None:
@@ -42,9 +42,8 @@ def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -
     from service.pipeline import ScenePipeline
 
     pipe = ScenePipeline.from_checkpoints(backend=backend, threads=threads)
-    ds = read_dataset(
-        data, gt, pipe.read_size
-    )  # the views as the service decodes them (tests/test_parity.py)
+    # The views as the service decodes them (tests/test_parity.py): the persons equal the served ones.
+    ds = read_dataset(data, gt, pipe.read_size)
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out, "w") as f:
         for i in tqdm(range(len(ds)), desc="pipeline", unit="frame"):
@@ -100,6 +99,12 @@ def sequences(
     return dict(out)
 
 
+def served_lines(path: Path) -> dict[str, dict]:
+    """The JSON lines of ``python -m service.client DATA --track``, by frame id."""
+    with open(path) as f:
+        return {r["id"]: r for r in (json.loads(t) for t in f if t.strip())}
+
+
 def served_tracks(lines: dict[str, dict], frame_id: str) -> tuple[dict[int, TrackedPerson], float]:
     """The confirmed tracks that the service answered for one frame, and its tracking milliseconds."""
     if frame_id not in lines:
@@ -120,7 +125,7 @@ def served_tracks(lines: dict[str, dict], frame_id: str) -> tuple[dict[int, Trac
 
 
 def served_pairs(
-    frame: SequenceFrame, tracks: dict[int, TrackedPerson], gate_mm: float = 500.0
+    frame: SequenceFrame, tracks: dict[int, TrackedPerson], gate_mm: float = GATE_MM
 ) -> list[tuple]:
     """One frame's (ground-truth index, track id) pairs: the optimal assignment on the mean joint distance between
     the ground truth and the tracks' smoothed joints, pairs beyond ``gate_mm`` left out (``track_eval``'s gate)."""
@@ -167,8 +172,7 @@ def main(argv: list[str] | None = None) -> dict:
     report = {"machine": machine_line(), "date": time.strftime("%Y-%m-%d"), "tracker": vars(config).copy()}
     report["sequences"] = {}
     if args.served:
-        with open(args.served) as f:
-            lines = {r["id"]: r for r in (json.loads(t) for t in f if t.strip())}
+        lines = served_lines(args.served)
         report["source"] = f"served: {args.served}"
         report["pipeline_seconds_per_frame"] = round(
             float(np.mean([r["latency_ms"] for r in lines.values()])) / 1e3, 3

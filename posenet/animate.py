@@ -40,7 +40,7 @@ import torch
 from tqdm import tqdm
 
 from posenet.cameras import Camera
-from posenet.data.mvor import MvorDataset
+from posenet.data.mvor import MvorDataset, room_up
 from posenet.data.sample import Sample
 from posenet.skeleton import BONES, NUM_JOINTS
 from posenet.visualize import PERSON_COLOURS, draw_box
@@ -137,10 +137,8 @@ class Floor:
 
     @classmethod
     def of(cls, annotations: dict, cameras: list[Camera]) -> Floor:
-        room = annotations["cameras_info"].get("camParams", {}).get("firstCamToRoomRef")
-        if room is not None:
-            up, source = np.asarray(room, np.float64).reshape(4, 4)[2, :3], "the room's"  # R(0->room)^T e_z
-        else:
+        up, source = room_up(annotations), "the room's"
+        if up is None:
             up = -np.mean([c.extrinsics[:3, 1].double().numpy() for c in cameras], 0)
             source = "the cameras'"
         down = -up / np.linalg.norm(up)

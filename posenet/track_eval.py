@@ -40,6 +40,10 @@ GOALS = {
 }
 
 
+# A track within this mean joint distance of a ground-truth person can be that person (the 3D gate of MOTA/IDF1).
+GATE_MM = 500.0
+
+
 @dataclass
 class SequenceFrame:
     """One frame of a sequence: its time, the ground truth and the pipeline's persons.
@@ -101,13 +105,13 @@ def run_tracker(frames: list[SequenceFrame], tracker: Tracker) -> tuple[list[dic
     return hyps, ms
 
 
-def evaluate(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = 500.0) -> dict:
+def evaluate(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GATE_MM) -> dict:
     """Track one sequence's ``frames`` (in time order) with ``tracker`` and measure it (module docstring)."""
     hyps, ms = run_tracker(frames, tracker)
     return score(frames, hyps, ms, gate_mm)
 
 
-def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_mm: float = 500.0) -> dict:
+def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_mm: float = GATE_MM) -> dict:
     """Measure tracks against the ground truth (module docstring).
 
     Args:

@@ -283,15 +283,16 @@ class ScenePipeline:
             raise ValueError(f"boxes has {len(boxes)} entries for {len(views)} views")
         t0 = time.perf_counter()
         limit, why = self._person_limit(len(views))
-        heat, members, unsure_groups = None, None, []
+        heat, matched, unsure_groups = None, [], []  # the skeleton matcher's groups (detector.matching.Group)
         if person_ids is not None:
             ids, groups = group_by_ids(person_ids)
         elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
             boxes, scores, candidate = self._fit_boxes(boxes, scores, limit, why, candidate)
-            heat, timings["match"], groups, members, unsure_groups = self._match_skeletons(
+            heat, timings["match"], matched, unsure_groups = self._match_skeletons(
                 boxes, views, candidate, detected=scores[0] is not None, unsure=unsure
             )
             timings["pose"] += _ms(t0) - timings["match"]
+            groups = [view_members(g) for g in matched]
             ids = list(range(len(groups)))
         elif any(len(b) for b in boxes):
             groups = self._match(boxes, views)
@@ -302,14 +303,9 @@ class ScenePipeline:
             if scores[0] is None:
                 raise ValueError(f"the boxes make {len(groups)} persons, more than {why}")
             # Detector mode: the matcher lists multi-view groups first; the best-supported persons are kept.
-            ids, groups = ids[:limit], groups[:limit]
-            members = None if members is None else members[:limit]
+            ids, groups, matched = ids[:limit], groups[:limit], matched[:limit]
         if unsure_groups:  # after the frame's persons, within the same limit
             unsure_groups = unsure_groups[: max(limit - len(groups), 0)]
-            unsure_members = members_of(unsure_groups, boxes)
-            width = max(members.shape[1], unsure_members.shape[1])
-            members = np.concatenate([np.pad(m, ((0, 0), (0, width - m.shape[1])), constant_values=-1)
-                                      for m in (members, unsure_members)])  # fmt: skip
             ids = ids + list(range(len(groups), len(groups) + len(unsure_groups)))
             groups = groups + [view_members(g) for g in unsure_groups]
         if heat is None:
@@ -328,7 +324,7 @@ class ScenePipeline:
         if persons:
             # The skeleton matcher's heatmaps: fuse its groups without another U-Net pass.
             if heat is not None:
-                prediction = heat.estimate(members)
+                prediction = heat.estimate(members_of(matched + unsure_groups, boxes))
             else:
                 scene = Scene.from_person_boxes(views, [p.boxes for p in persons], [p.id for p in persons])
                 prediction = self.pose.predict(scene)
@@ -397,10 +393,10 @@ class ScenePipeline:
     ):
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
-        Returns ``(heat, match_ms, groups, members, unsure_groups)``: the heatmaps to fuse from, the milliseconds
-        of the association (after the U-Net and each box's softmax moments, which the fusion needs with any
-        grouping), per person and view the indices of its boxes there, their ``(P, S)`` box numbers, and with
-        ``unsure`` the groups of the unsure boxes left over (``group_unsure``; else none)."""
+        Returns ``(heat, match_ms, groups, unsure_groups)``: the heatmaps to fuse from, the milliseconds of the
+        association (after the U-Net and each box's softmax moments, which the fusion needs with any grouping),
+        the persons (``detector.matching.Group``), and with ``unsure`` the groups of the unsure boxes left over
+        (``group_unsure``; else none)."""
         heat = self.pose.box_heatmaps(list(views), boxes)
         heat.reduce()  # the fusion's per-box softmax, needed whatever groups the boxes: the pose stage's
         t0 = time.perf_counter()
@@ -421,7 +417,7 @@ class ScenePipeline:
             left = group_unsure(
                 heat, views, boxes, groups, candidate, config, self.config.max_match_combinations
             )
-        return heat, _ms(t0), [view_members(g) for g in groups], members_of(groups, boxes), left
+        return heat, _ms(t0), groups, left
 
     # ----------------------------------------------------------------------------------------- offline
     def run_sample(self, sample: Sample, reference_boxes: bool = True) -> tuple[SceneResult, list[dict]]:
