@@ -110,6 +110,7 @@ class BoxHeatmaps:
     passes: list[BoxPass]
     estimate_fn: object
     eps: float = lifting.EPS_LOGIT
+    _single: JointEstimate | None = field(default=None, init=False, repr=False)
 
     def reduce(self) -> None:
         """Reduce every box's clouds to their softmax moments now (:meth:`BoxPass.moments`): the per-box half of
@@ -212,8 +213,11 @@ class BoxHeatmaps:
         )
 
     def single_view(self) -> JointEstimate:
-        """Each box lifted alone: joints (N, J, 3), confidence (N, J), has_points (N,)."""
-        return self.estimate(torch.arange(self.num_boxes)[:, None])
+        """Each box lifted alone: joints (N, J, 3), confidence (N, J), has_points (N,); computed once (the
+        matcher reads it again for the boxes it left over), so treat it as read-only."""
+        if self._single is None:
+            self._single = self.estimate(torch.arange(self.num_boxes)[:, None])
+        return self._single
 
 
 def slot_layout(boxes: Sequence[np.ndarray]) -> tuple[Tensor, Tensor, Tensor, Tensor]:

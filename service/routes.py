@@ -29,7 +29,7 @@ from service.pipeline import ScenePipeline, SceneResult
 from service.response import encode
 from service.schemas import Error, Health, ModelInfo, Ready, SceneOut, StreamEnded, StreamFrameOut
 from service.settings import Settings
-from service.streams import MAX_TIMESTAMP_S, check_stream_id, parse_timestamp
+from service.streams import MAX_TIMESTAMP_S, check_stream_id, find_up, parse_timestamp
 from service.validation import Limits, ValidatedScene, parse_scene, validate_scene
 
 public = APIRouter()
@@ -349,7 +349,8 @@ async def post_stream_frame(
         result, scene, decode_ms = await scene_result(
             request, pipeline, scene_text, files, t_start, unsure=bool(settings.track_unsure_gate_mm)
         )
-        body = frame.answer(result, scene, decode_ms, t_start)
+        floor = await find_up(frame.stream, scene) if scene.up is None and settings.track_floor_up else None
+        body = frame.answer(result, scene, decode_ms, t_start, floor)
     return Response(body, media_type="application/json")
 
 

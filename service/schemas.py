@@ -125,8 +125,9 @@ class SceneIn(BaseModel):
     up: Vector3 | None = Field(
         None,
         description="optional: the room's up direction (towards the ceiling) in the reference frame, any length "
-        "(e.g. the z axis of MVOR's firstCamToRoomRef in camera 0's frame). Streams then leave persons lying down "
-        "(the patient on the table) without a track (ORPOSE_TRACK_MIN_HEIGHT_MM); POST /scenes does not use it",
+        "(e.g. the z axis of MVOR's firstCamToRoomRef in camera 0's frame). Streams leave persons lying down "
+        "(the patient on the table) without a track (ORPOSE_TRACK_MIN_HEIGHT_MM); without it they find the up "
+        "from the floor in the depth images (ORPOSE_TRACK_FLOOR_UP). POST /scenes does not use it",
     )
 
 
@@ -241,6 +242,11 @@ class TrackedPerson(Person):
 
 class StreamTimings(Timings):
     track: float = Field(..., description="the tracker's update for this frame, ms")
+    floor: float = Field(
+        0.0,
+        description="looking for the floor in the depth images, for the room's up (a stream's first frame of a "
+        "rig, when the scene gives no up; 0 on the others), ms",
+    )
 
 
 class StreamState(BaseModel):
@@ -257,6 +263,12 @@ class StreamState(BaseModel):
     )
     clock: Literal["client", "server"] = Field(
         ..., description="client: times are the frames' timestamp_s; server: the server's receive times"
+    )
+    up: Literal["scene", "floor", "none"] = Field(
+        ...,
+        description="the room's up direction the tracker used for this frame (persons lying down along it are "
+        "not tracked): scene: the scene's up; floor: the floor's normal found in the stream's depth images "
+        "(ORPOSE_TRACK_FLOOR_UP); none: neither, so lying persons are tracked too",
     )
 
 

@@ -131,6 +131,13 @@ class Settings(BaseSettings):
         description="streams, for scenes that give the room's up direction: persons whose skeleton spans less "
         "than this many mm along it (lying down, e.g. the patient) are answered without a track (0 tracks all)",
     )
+    # Scenes without "up": a stream finds the floor in its first frame's depth images (posenet.rig.check.
+    # floor_of_frame: within 0.3 degrees of the room frame on rendered MVOR-rig frames, some tens of ms once).
+    track_floor_up: bool = Field(
+        True,
+        description="streams, for scenes that give no up: take the room's up from the floor seen in the depth "
+        "images (found once per stream and rig), so that persons lying down are left untracked there too",
+    )
     # posenet.track.TrackerConfig.unsure_gate_mm: persons of boxes the detector was unsure of in every view
     # (detector.skeleton_matching.group_unsure) may continue a track this close to it, never start one.
     track_unsure_gate_mm: float = Field(

@@ -12,6 +12,11 @@ adds a ``track_id`` and the smoothed joints to every person.
 - **Time.** A frame's time is its form field ``timestamp_s`` (seconds, on any clock that the client keeps
   for the whole stream). A stream whose first frame has none uses the server's receive time instead, counted
   from that first frame; one stream never mixes the two (409).
+- **Up.** The tracker leaves persons lying down untracked when it knows the room's up direction: the scene's
+  ``up`` when it gives one, else (``ORPOSE_TRACK_FLOOR_UP``) the normal of the floor seen in the frame's depth
+  images (``posenet.rig.check.floor_of_frame``, some tens of ms in a worker thread), found once per stream and
+  rig and kept; a frame that shows no floor leaves the rule off, and the stream looks again
+  ``FLOOR_RETRY_FRAMES`` frames later. Each response says which it used (``stream.up``).
 - **Bounds.** At most ``ORPOSE_MAX_STREAMS`` streams are held; one more is a 503 with Retry-After (the time
   until the least recently used idle stream expires). A stream that gets no frame for
   ``ORPOSE_STREAM_IDLE_S`` ends; expired streams are dropped whenever a stream route is called. ``DELETE
@@ -32,8 +37,10 @@ from dataclasses import dataclass, field
 
 import anyio
 import numpy as np
+import torch
 from fastapi import HTTPException
 
+from posenet.rig.check import floor_of_frame
 from posenet.skeleton import JOINTS
 from posenet.track import Tracker
 from service.errors import InputError
@@ -54,6 +61,8 @@ STREAM_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
 # Times beyond this lose sub-millisecond resolution in a float64 (and no clock of a recording reaches it: Unix
 # time is 1.8e9 s).
 MAX_TIMESTAMP_S = 1e11
+# A stream whose frames showed no floor looks for one again after this many frames (each look costs tens of ms).
+FLOOR_RETRY_FRAMES = 30
 
 
 def check_stream_id(stream_id: str) -> None:
@@ -94,6 +103,44 @@ class Stream:
     clock: str | None = None  # "client" or "server", fixed by the first frame taken
     last_time: float | None = None  # the last frame's time on that clock, s
     origin: float = 0.0  # server clock: the first frame's receive time (registry clock)
+    floor: Floor | None = None  # the last look for the floor (for scenes without up)
+
+
+@dataclass(frozen=True)
+class Floor:
+    """A stream's look for the floor in a frame's depth images: the rig it was made on (the cameras' extrinsics,
+    as bytes), the room's up found (3,), or None, and the stream's frame count then."""
+
+    rig: bytes
+    up: np.ndarray | None
+    frames: int
+
+
+def rig_key(scene: ValidatedScene) -> bytes:
+    """The extrinsics of a scene's cameras as bytes: equal for frames of one rig (the floor depends on nothing
+    else; the intrinsics change with the decoding size)."""
+    return b"".join(v.camera.extrinsics.to(torch.float64).numpy().tobytes() for v in scene.views)
+
+
+async def find_up(stream: Stream, scene: ValidatedScene) -> tuple[np.ndarray | None, Floor | None, float]:
+    """The room's up for a frame of ``stream`` whose scene gives none: the floor in its depth images
+    (``posenet.rig.check.floor_of_frame``, in a worker thread), or the stream's earlier look on the same rig.
+
+    Returns (up (3,) or None, the look to keep (:meth:`Frame.answer` commits it; None: nothing new), ms)."""
+    rig = rig_key(scene)
+    last = stream.floor
+    if (
+        last is not None
+        and last.rig == rig
+        and (last.up is not None or stream.frames - last.frames < FLOOR_RETRY_FRAMES)
+    ):
+        return last.up, None, 0.0
+    t0 = time.perf_counter()
+    found = await anyio.to_thread.run_sync(
+        floor_of_frame, [v.camera for v in scene.views], [v.depth for v in scene.views]
+    )
+    up = None if found is None else found[0].numpy()
+    return up, Floor(rig, up, stream.frames), (time.perf_counter() - t0) * 1e3
 
 
 class StreamRegistry:
@@ -215,10 +262,19 @@ class Frame:
     clock: str  # "client" or "server"
     received: float  # the request's arrival, registry clock
 
-    def answer(self, result: SceneResult, scene: ValidatedScene, decode_ms: float, t_start: float) -> bytes:
+    def answer(
+        self,
+        result: SceneResult,
+        scene: ValidatedScene,
+        decode_ms: float,
+        t_start: float,
+        floor: tuple[np.ndarray | None, Floor | None, float] | None = None,
+    ) -> bytes:
         """Track ``result``'s persons, commit the frame to the stream, and return the response body.
 
-        The stream changes only here, after every check has passed, so a rejected frame leaves it as it was.
+        ``floor``: :func:`find_up`'s answer for a scene without ``up`` (None: the rule has no up unless the scene
+        gives one). The stream changes only here, after every check has passed, so a rejected frame leaves it as
+        it was.
         """
         t0 = time.perf_counter()
         out = scene_out(result, scene, decode_ms)  # 422 on a non-finite estimate, before the tracker sees it
@@ -226,11 +282,15 @@ class Frame:
         joints = np.array([p.joints for p in result.persons], np.float64).reshape(-1, len(JOINTS), 3)
         spread = np.array([p.spread_mm for p in result.persons], np.float64).reshape(-1, len(JOINTS))
         unsure = np.array([p.unsure for p in result.persons], bool)
+        up, look, floor_ms = floor if floor is not None and scene.up is None else (scene.up, None, 0.0)
+        up_source = "scene" if scene.up is not None else "floor" if up is not None else "none"
         t_track = time.perf_counter()
-        tracked = stream.tracker.update(joints, spread, self.time, unsure, scene.up)
+        tracked = stream.tracker.update(joints, spread, self.time, unsure, up)
         track_ms = (time.perf_counter() - t_track) * 1e3
         if stream.clock is None:
             stream.clock, stream.origin = self.clock, self.received
+        if look is not None:
+            stream.floor = look
         stream.frames += 1
         stream.last_time = self.time
         # A person the detector was unsure of is answered only when it continues a track; the persons before it
@@ -253,7 +313,9 @@ class Frame:
             mode=out.mode,
             persons=persons,
             notes=out.notes,
-            timings=StreamTimings(**out.timings.model_dump(), track=track_ms),
-            stream=StreamState(id=stream.id, frames=stream.frames, timestamp_s=self.time, clock=stream.clock),
+            timings=StreamTimings(**out.timings.model_dump(), track=track_ms, floor=floor_ms),
+            stream=StreamState(
+                id=stream.id, frames=stream.frames, timestamp_s=self.time, clock=stream.clock, up=up_source
+            ),
         )
         return serialise(body, t0, t_start)

@@ -18,8 +18,7 @@ from posenet.rig.check import (
     camera_agreement,
     depth_agreement,
     depth_checks,
-    find_floor,
-    lift_depth,
+    floor_of_frame,
     sanity_checks,
 )
 from posenet.rig.geometry import check_direction
@@ -266,9 +265,7 @@ def test_floor_is_found_in_the_depth_frames(mvor_file):
     small = Rig([c.scale(0.25) for c in room.cameras], room.names)
     depths = _render_room(small)
     first = small.to_first_camera()
-    points = torch.cat([lift_depth(c, d, stride=2) for c, d in zip(first.cameras, depths, strict=True)])
-    guess = -torch.stack([c.extrinsics[:3, 1] for c in first.cameras]).mean(0)
-    normal, height, share = find_floor(points, guess)
+    normal, height, share = floor_of_frame(first.cameras, depths, stride=2)
     room_z = small.cameras[0].extrinsics[:3, :3].T @ torch.tensor(
         [0, 0, 1.0], dtype=torch.float64
     )  # in camera 0

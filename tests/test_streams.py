@@ -22,6 +22,7 @@ from service_harness import REPO_ROOT, Server, form_kwargs, reference_box_env
 
 from posenet.data.mvor import MvorDataset, load_annotations
 from posenet.data.synth.__main__ import main as synth
+from posenet.rig.check import floor_of_frame
 from posenet.skeleton import JOINTS
 from service.client import scene_request, stream_prefix
 
@@ -85,18 +86,23 @@ def track_of(out: dict) -> dict[int, int | None]:
 
 
 # ----------------------------------------------------------------------------------------------- tracking
-def test_the_room_s_up_reaches_the_tracker(tmp_path_factory, sequence):
+@pytest.mark.parametrize("floor_up", [False, True])
+def test_the_room_s_up_reaches_the_tracker(tmp_path_factory, sequence, floor_up):
     """The client sends the rendered room's up with each frame; with ORPOSE_TRACK_MIN_HEIGHT_MM above any
-    skeleton's height along it nobody gets a track, and the same frames without "up" are tracked."""
+    skeleton's height along it nobody gets a track. The same frames without "up" are tracked when the stream may
+    not look for the floor (ORPOSE_TRACK_FLOOR_UP=0), and are not when it may: it finds the up in the depth
+    images, once (its first frame's floor timing, zero after)."""
     env = {
         **reference_box_env(tmp_path_factory.mktemp("ckpt_up")),
         "ORPOSE_TRACK_MAX_SPREAD_MM": "5000",
         "ORPOSE_TRACK_MIN_TORSO_MM": "0",
         "ORPOSE_TRACK_MIN_HEIGHT_MM": "2000",
+        "ORPOSE_TRACK_FLOOR_UP": "1" if floor_up else "0",
     }
     assert sequence.ds[0].up is not None
     with Server(env) as url, httpx.Client(base_url=url, timeout=60) as client:
         for stream, keep_up in (("with-up", True), ("without-up", False)):
+            floor_ms = []
             for k, t in enumerate(sequence.times):
                 form = sequence.form(k, t)
                 scene = json.loads(form["data"]["scene"])
@@ -104,8 +110,23 @@ def test_the_room_s_up_reaches_the_tracker(tmp_path_factory, sequence):
                 if not keep_up:
                     form["data"]["scene"] = json.dumps({"views": scene["views"]})
                 out = ok(client.post(f"/streams/{stream}/frames", **form))
+                floor_ms.append(out["timings"]["floor"])
+                assert out["stream"]["up"] == ("scene" if keep_up else "floor" if floor_up else "none")
             tracked = {i for i in track_of(out).values() if i is not None}
-            assert bool(tracked) == (not keep_up), (stream, track_of(out))
+            assert bool(tracked) == (not keep_up and not floor_up), (stream, track_of(out))
+            looked = not keep_up and floor_up
+            assert (floor_ms[0] > 0) == looked and not any(floor_ms[1:]), floor_ms
+
+
+def test_the_floor_of_a_rendered_frame_gives_the_room_s_up(sequence):
+    """posenet.rig.check.floor_of_frame (what a stream uses when the scene gives no up) on a rendered frame: the
+    room frame's up within half a degree."""
+    s = MvorDataset(sequence.root, sequence.gt)[0]
+    up, height, share = floor_of_frame([v.camera for v in s.views], [v.depth for v in s.views])
+    assert float(up.numpy() @ s.up) > np.cos(np.radians(0.5)) and share > 0.2
+    assert all(
+        1500 < float(v.camera.position.double() @ up) - height < 3500 for v in s.views
+    )  # ceiling-mounted
 
 
 def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequence):
@@ -113,7 +134,7 @@ def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequ
     try:
         for k, out in enumerate(answers):
             assert out["stream"] == {"id": "seq-a", "frames": k + 1, "timestamp_s": sequence.times[k],
-                                     "clock": "client"}  # fmt: skip
+                                     "clock": "client", "up": "scene"}  # fmt: skip
             assert out["mode"] == "reference_boxes" and out["timings"]["track"] >= 0
             for p in out["persons"]:
                 assert [j["name"] for j in p["smoothed_joints"]] == list(JOINTS)

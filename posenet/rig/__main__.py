@@ -102,8 +102,7 @@ def check(args: argparse.Namespace) -> int:
         camera_agreement,
         depth_agreement,
         depth_checks,
-        find_floor,
-        lift_depth,
+        floor_of_frame,
         sanity_checks,
     )
     from posenet.rig.picture import draw_rig, up_vector
@@ -129,10 +128,7 @@ def check(args: argparse.Namespace) -> int:
     floor, up_source = None, None
     if depths and up is None:
         drawn_rig, guess, _ = up_vector(rig)
-        points = torch.cat(
-            [lift_depth(c, d, stride=8) for c, d in zip(drawn_rig.cameras, depths, strict=True)]
-        )
-        found = find_floor(points, guess)
+        found = floor_of_frame(drawn_rig.cameras, depths, guess, stride=8)
         if found is None:
             print(
                 "WARN floor: no large surface below the cameras in the depth frames; up estimated without it"

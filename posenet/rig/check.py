@@ -22,11 +22,13 @@ import numpy as np
 import torch
 
 from posenet.cameras import Camera, is_rigid, pixel_grid
-from posenet.rig.geometry import PLAUSIBLE_SPACING_MM, camera_spacing, common_view
+from posenet.rig.geometry import PLAUSIBLE_SPACING_MM, camera_spacing, common_view, image_up
 from posenet.rig.rigfile import Rig
 
 FOV_RANGE_DEG = (30.0, 140.0)
 AGREE_MM = 50.0
+# floor_of_frame's default sampling: within 0.3 degrees of the room frame on rendered frames.
+FLOOR_POINTS_PER_VIEW = 3000
 
 
 def field_of_view(camera: Camera) -> tuple[float, float] | None:
@@ -204,3 +206,22 @@ def find_floor(
     n = n if float(n @ up) > 0 else -n
     height = float(centre @ n)
     return n, height, float((((points @ n) - height).abs() < 40).float().mean())
+
+
+def floor_of_frame(
+    cameras: list[Camera],
+    depths: list[np.ndarray],
+    guess: torch.Tensor | None = None,
+    stride: int | None = None,
+) -> tuple[torch.Tensor, float, float] | None:
+    """The floor seen in one synchronised frame's depth images (uint16 mm, each at its camera's resolution):
+    :func:`find_floor` on every view's points (:func:`lift_depth`), around ``guess`` (default: the cameras' mean
+    image-up axis, ``posenet.rig.geometry.image_up``). ``stride``: every how many pixels (default: about
+    ``FLOOR_POINTS_PER_VIEW`` points per view, whatever the resolution). Returns (the room's up (3,), unit, in the
+    reference frame; the floor's height along it, mm; share of the points on it), or None when no floor is seen."""
+    guess = image_up(cameras) if guess is None else guess.to(torch.float64)
+    clouds = []
+    for c, d in zip(cameras, depths, strict=True):
+        step = stride or max(1, round(math.sqrt(d.size / FLOOR_POINTS_PER_VIEW)))
+        clouds.append(lift_depth(c.to(dtype=torch.float64), d, step))
+    return find_floor(torch.cat(clouds), guess)

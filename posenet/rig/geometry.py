@@ -55,6 +55,14 @@ def check_unit(cameras_mm: list[Camera], unit: str, source: str, declared: bool)
     return line + " (IMPLAUSIBLE for a room, and no other unit fixes it: check the file)"
 
 
+def image_up(cameras: list[Camera]) -> torch.Tensor:
+    """A first guess of the room's up (3,), unit, in the reference frame: the cameras' mean image-up axis (minus
+    the camera y axis; cameras hang roughly upright, so their tilts largely cancel over a rig). Within some tens of
+    degrees; ``posenet.rig.check.find_floor`` refines it on depth frames."""
+    down = torch.stack([c.extrinsics[..., :3, 1] for c in cameras]).mean(0)
+    return -down / down.norm()
+
+
 def optical_axes(camera: Camera) -> tuple[torch.Tensor, torch.Tensor]:
     """``(*B, 3)`` optical centres and ``(*B, 3)`` unit viewing directions (the camera z axis) in the reference frame."""
     return camera.position, camera.extrinsics[..., :3, 2]

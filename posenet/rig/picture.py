@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from posenet.rig.geometry import look_at_point
+from posenet.rig.geometry import image_up, look_at_point
 from posenet.rig.rigfile import Rig
 
 
@@ -24,8 +24,7 @@ def up_vector(rig: Rig, up: torch.Tensor | None = None) -> tuple[Rig, torch.Tens
         return rig, up / up.norm(), "given"
     if rig.to_room is not None:
         return rig.to_room_frame(), torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64), "room frame z"
-    down = torch.stack([c.extrinsics[:3, 1] for c in rig.cameras]).mean(0)
-    return rig, -down / down.norm(), "cameras' mean image-up axis"
+    return rig, image_up(rig.cameras), "cameras' mean image-up axis"
 
 
 def coverage(rig: Rig, points: torch.Tensor, max_range_mm: float) -> torch.Tensor:
