@@ -64,9 +64,9 @@ from scipy.optimize import linear_sum_assignment
 
 from detector.matching import (
     Group,
+    _depth_samples,
     _valid_median,
     box_centres_3d,
-    box_depths,
     choose_greedily,
     choose_optimally,
     combination_bound,
@@ -473,26 +473,31 @@ def admit_candidates(
 
 
 def seen_from(
-    view: SceneView, points: np.ndarray, free_mm: float
+    views: Sequence[SceneView], points: np.ndarray, free_mm: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Which of ``points (K, 3)`` (mm, reference frame) ``view`` sees unobstructed.
+    """Which of ``points (K, 3)`` (mm, reference frame) each of the V ``views`` sees unobstructed.
 
-    Returns ``(seen (K,), inside (K,), uv (K, 2))``: a point is inside when it projects into the image in front
-    of the camera, and seen when, moreover, the depth measured there (the median valid depth over 5 x 5 pixels)
-    is at most ``free_mm`` short of the point's own depth: no surface hides it. Pixels without depth say
-    nothing."""
-    camera = view.camera
-    p = torch.as_tensor(np.asarray(points, np.float64).reshape(-1, 3), dtype=camera.intrinsics.dtype)
-    in_camera = camera.to_camera(p)  # (K, 3)
-    z = in_camera[:, 2].numpy()  # (K,)
-    uv = camera.project_camera(in_camera).numpy()  # (K, 2)
-    h, w = view.depth.shape
+    Returns ``(seen (V, K), inside (V, K), uv (V, K, 2))``: a point is inside a view when it projects into its image
+    in front of the camera, and seen when, moreover, the depth measured there (the median valid depth over 5 x 5
+    pixels) is at most ``free_mm`` short of the point's own depth: no surface hides it. Pixels without depth say
+    nothing. All views are projected at once (one stacked camera), their depths sampled in one median."""
+    cameras = Camera.stack([v.camera for v in views])
+    p = torch.as_tensor(np.asarray(points, np.float64).reshape(-1, 3), dtype=cameras.intrinsics.dtype)
+    in_camera = cameras.to_camera(p)  # (V, K, 3)
+    z = in_camera[..., 2].numpy()  # (V, K)
+    uv = cameras.project_camera(in_camera).numpy()  # (V, K, 2)
+    hw = np.array([v.depth.shape for v in views], np.float64)  # (V, 2)
     with np.errstate(invalid="ignore"):
-        inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-    seen = np.zeros(len(z), bool)
+        inside = (z > 0) & (uv >= 0).all(-1) & (uv[..., 0] < hw[:, 1:]) & (uv[..., 1] < hw[:, :1])
+    seen = np.zeros(z.shape, bool)
     if inside.any():
-        u, v = uv[inside, 0], uv[inside, 1]
-        measured = box_depths(np.stack([u - 2.5, v - 2.5, u + 2.5, v + 2.5], 1), view.depth, 1.0, 5)
+        samples = []
+        for v, view in enumerate(views):
+            u, w = uv[v, inside[v], 0], uv[v, inside[v], 1]
+            samples.append(
+                _depth_samples(np.stack([u - 2.5, w - 2.5, u + 2.5, w + 2.5], 1), view.depth, 1.0, 5)
+            )
+        measured = _valid_median(np.concatenate(samples))  # one median over every view's points
         seen[inside] = np.nan_to_num(measured, nan=-np.inf) >= z[inside] - free_mm
     return seen, inside, uv
 
@@ -514,20 +519,25 @@ def drop_unseen(
         seen_in = [v for v, k in enumerate(g.indices) if k >= 0]
         if len(seen_in) == 1:
             alone[p] = (seen_in[0], int(starts[seen_in[0]] + g.indices[seen_in[0]]))
+    if not alone:
+        return groups
+    persons = list(alone)
+    n = np.array([alone[p][1] for p in persons])
+    V, J = len(views), joints.shape[1]
+    # every alone person's joints in every view at once (a person's own view is skipped below)
+    seen, inside, uv = seen_from(views, joints[n].reshape(-1, 3), free_mm)
+    seen, inside = seen.reshape(V, -1, J) & ok[n], inside.reshape(V, -1, J) & ok[n]  # (V, R, J)
+    uv = uv.reshape(V, -1, J, 2)
     drop = set()
-    for v, view in enumerate(views):
-        rows = [(p, n) for p, (v0, n) in alone.items() if v0 != v and p not in drop]
-        if not rows:
-            continue
-        n = np.array([b for _, b in rows])
-        J = joints.shape[1]
-        seen, inside, uv = seen_from(view, joints[n].reshape(-1, 3), free_mm)  # all their joints at once
-        seen, inside, uv = seen.reshape(-1, J) & ok[n], inside.reshape(-1, J) & ok[n], uv.reshape(-1, J, 2)
+    for v in range(V):
         view_boxes = np.asarray(boxes[v], np.float64).reshape(-1, 4)
-        for r in np.flatnonzero(seen.sum(1) >= min_joints):
-            at = uv[r][inside[r]]
+        for r in np.flatnonzero(seen[v].sum(1) >= min_joints):
+            p = persons[r]
+            if alone[p][0] == v or p in drop:
+                continue
+            at = uv[v, r][inside[v, r]]
             # the box around the projections (a point-sized one is covered by any box around it)
             region = np.concatenate([at.min(0) - 0.5, at.max(0) + 0.5])
             if not np.any(box_coverage(view_boxes, region) >= covered):
-                drop.add(rows[r][0])
+                drop.add(p)
     return [g for p, g in enumerate(groups) if p not in drop]
