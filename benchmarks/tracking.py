@@ -152,7 +152,12 @@ def main(argv: list[str] | None = None) -> dict:
         help="instead: the JSON lines of `service.client DATA --track` (the service's own tracks and timings)",
     )
     p.add_argument("--redetect", action="store_true", help="run the pipeline even when --detections exists")
-    p.add_argument("--backend", default="torch", help="the networks' runtime (torch, openvino, onnxruntime)")
+    p.add_argument(
+        "--backend",
+        default="auto",
+        help="the networks' runtime (auto: the service's choice, so that offline persons equal the served ones; "
+        "torch, openvino, onnxruntime)",
+    )
     p.add_argument("--threads", type=int, default=None, help="the runtimes' intra-op threads")
     p.add_argument("--json", type=Path, help="also write the figures here")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
