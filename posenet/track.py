@@ -304,6 +304,61 @@ class Tracker:
         self.bones = np.concatenate([self.bones, np.full((n, c.bone_history, len(BONES)), np.nan)])
         self.frames_seen = np.concatenate([self.frames_seen, np.zeros(n, int)])
 
+    @staticmethod
+    def _persons(joints, spread) -> tuple[np.ndarray, np.ndarray]:
+        """A frame's persons as ``(P, J, 3)`` joints and ``(P, J)`` spreads, float; ValueError when not finite."""
+        joints = (
+            np.asarray(joints, float).reshape(-1, NUM_JOINTS, 3)
+            if np.size(joints)
+            else np.zeros((0, NUM_JOINTS, 3))
+        )
+        spread = np.asarray(spread, float).reshape(len(joints), NUM_JOINTS)
+        if not (np.isfinite(joints).all() and np.isfinite(spread).all()):
+            raise ValueError("joints and spread must be finite")
+        return joints, spread
+
+    def _usable(self, joints: np.ndarray, spread: np.ndarray, up: np.ndarray | None) -> np.ndarray:
+        """``(P,)`` the persons a track may take (spread, torso and, with the room's up, height; step 1)."""
+        c = self.config
+        usable = (np.median(spread, axis=1) <= c.max_spread_mm) & (torso_length(joints) >= c.min_torso_mm)
+        if up is not None:
+            usable &= skeleton_height(joints, up) >= c.min_height_mm
+        return usable
+
+    def _claims(self, cost: np.ndarray, eligible: np.ndarray) -> np.ndarray:
+        """``(P,)`` the track each of the ``eligible`` persons takes (-1: none): optimal assignment on ``cost (T,
+        P)`` (mm, to the tracks' predicted joints) under each track's gate, widened while it coasts."""
+        c = self.config
+        track_of = np.full(cost.shape[1], -1)
+        gate = c.gate_mm + c.coast_speed_mm_s * self.unseen_s  # (T,)
+        ok_pair = (cost <= gate[:, None]) & eligible[None]
+        if ok_pair.any():
+            rows, cols = linear_sum_assignment(np.where(ok_pair, cost, 1e9))
+            ok = ok_pair[rows, cols]
+            track_of[cols[ok]] = rows[ok]
+        return track_of
+
+    def needs_unsure(
+        self, joints: np.ndarray, spread: np.ndarray, timestamp_s: float, up: np.ndarray | None = None
+    ) -> bool:
+        """Whether :meth:`update` at ``timestamp_s`` could give a person the detector was unsure of a track, when
+        the frame's sure persons are ``joints (P, J, 3)`` / ``spread (P, J)``: whether a confirmed track is left
+        that none of them takes (the first pass of :meth:`update`, on the predicted joints; the tracker does not
+        change). When it is False, unsure persons change nothing, so a caller may skip finding them."""
+        c = self.config
+        confirmed = self.ids >= 0
+        if c.unsure_gate_mm is None or not confirmed.any():
+            return False
+        if self.time is not None and not timestamp_s > self.time:
+            return True  # update will refuse the frame; nothing to save
+        joints, spread = self._persons(joints, spread)
+        if not len(joints):
+            return True
+        decay = np.where(self.unseen > 0, c.coast_velocity_decay, 1.0)[:, None, None]
+        pos = self.pos + self.vel * decay * (timestamp_s - self.time)  # as _predict
+        track_of = self._claims(mean_joint_distance(pos, joints), self._usable(joints, spread, up))
+        return bool((confirmed & ~np.isin(np.arange(self.num_tracks), track_of)).any())
+
     def update(
         self,
         joints: np.ndarray,
@@ -323,14 +378,7 @@ class Tracker:
                 ``min_height_mm`` along it (a person lying down) are not tracked.
         """
         c = self.config
-        joints = (
-            np.asarray(joints, float).reshape(-1, NUM_JOINTS, 3)
-            if np.size(joints)
-            else np.zeros((0, NUM_JOINTS, 3))
-        )
-        spread = np.asarray(spread, float).reshape(len(joints), NUM_JOINTS)
-        if not (np.isfinite(joints).all() and np.isfinite(spread).all()):
-            raise ValueError("joints and spread must be finite")
+        joints, spread = self._persons(joints, spread)
         if self.time is not None and not timestamp_s > self.time:
             raise ValueError(
                 f"timestamp {timestamp_s} s is not later than the previous frame's {self.time} s"
@@ -342,34 +390,21 @@ class Tracker:
         # 1. assignment under the gate
         n_tracks, n_dets = self.num_tracks, len(joints)
         unsure = np.zeros(n_dets, bool) if unsure is None else np.asarray(unsure, bool).reshape(n_dets)
-        usable = (np.median(spread, axis=1) <= c.max_spread_mm) & (
-            torso_length(joints) >= c.min_torso_mm
-        )  # (P,)
-        if up is not None:
-            usable &= skeleton_height(joints, up) >= c.min_height_mm
+        usable = self._usable(joints, spread, up)  # (P,)
         track_of = np.full(n_dets, -1)
         if n_tracks and n_dets:
             cost = mean_joint_distance(self.pos, joints)  # (T, P)
-            gate = c.gate_mm + c.coast_speed_mm_s * self.unseen_s  # (T,)
-            allowed = (cost <= gate[:, None]) & usable[None]
-            for second in (False, True):  # sure persons first, then unsure ones for confirmed tracks left
-                if second and c.unsure_gate_mm is None:
-                    break
+            track_of = self._claims(cost, usable & ~unsure)  # sure persons first
+            if c.unsure_gate_mm is not None and unsure.any():  # then unsure ones, for confirmed tracks left
                 claimed = np.isin(np.arange(n_tracks), track_of)
-                free = ~claimed & (self.ids >= 0 if second else True)
-                if second:  # an unsure person near a track a sure person took is that person seen again
-                    again = (
-                        (cost[claimed] < c.duplicate_mm).any(0) if claimed.any() else np.zeros(n_dets, bool)
-                    )
-                    gated = (cost <= c.unsure_gate_mm) & (usable & ~again)[None]
-                else:
-                    gated = allowed
-                ok_pair = gated & free[:, None] & (unsure == second)[None]
-                if not ok_pair.any():
-                    continue
-                rows, cols = linear_sum_assignment(np.where(ok_pair, cost, 1e9))
-                ok = ok_pair[rows, cols]
-                track_of[cols[ok]] = rows[ok]
+                # an unsure person near a track a sure person took is that person seen again
+                again = (cost[claimed] < c.duplicate_mm).any(0) if claimed.any() else np.zeros(n_dets, bool)
+                gated = (cost <= c.unsure_gate_mm) & (usable & ~again)[None]
+                ok_pair = gated & (~claimed & (self.ids >= 0))[:, None] & unsure[None]
+                if ok_pair.any():
+                    rows, cols = linear_sum_assignment(np.where(ok_pair, cost, 1e9))
+                    ok = ok_pair[rows, cols]
+                    track_of[cols[ok]] = rows[ok]
         matched = track_of >= 0
         tracks = track_of[matched]
         self._update(tracks, joints[matched], spread[matched])

@@ -102,7 +102,12 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
         unsure_gate_mm=settings.track_unsure_gate_mm or None,
     )
     app.state.streams = StreamRegistry(
-        settings.max_streams, settings.stream_idle_s, lambda: Tracker(tracker), settings.retry_after_s
+        settings.max_streams,
+        settings.stream_idle_s,
+        lambda: Tracker(tracker),
+        settings.retry_after_s,
+        floor_up=settings.track_floor_up,
+        unsure=bool(settings.track_unsure_gate_mm),
     )
     app.add_middleware(
         BodyLimitMiddleware,

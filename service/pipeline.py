@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -255,7 +256,7 @@ class ScenePipeline:
         views: list[SceneView],
         boxes: list[np.ndarray] | None = None,
         person_ids: list[np.ndarray] | None = None,
-        unsure: bool = False,
+        unsure: bool | Callable[[np.ndarray, np.ndarray], bool] = False,
     ) -> SceneResult:
         """Estimate every person's 3D pose in one frame.
 
@@ -265,7 +266,9 @@ class ScenePipeline:
             person_ids: per view (K_v,) identities of the reference boxes; None groups them with the matcher.
             unsure: also list, after the frame's persons, those of boxes the detector was unsure of in every
                 view (``PersonResult.unsure``; detector mode with the skeleton matcher and unsure boxes on),
-                for a tracker: they are no persons of the frame on their own.
+                for a tracker: they are no persons of the frame on their own. A function of the frame's persons
+                (joints (P, J, 3) mm, spreads (P, J) mm) lists them only when it says so (a stream asks its
+                tracker: ``posenet.track.Tracker.needs_unsure``), and skips finding them otherwise.
         """
         if not views:
             raise ValueError("a scene needs at least one view")
@@ -284,13 +287,15 @@ class ScenePipeline:
         t0 = time.perf_counter()
         limit, why = self._person_limit(len(views))
         heat, matched, unsure_groups = None, [], []  # the skeleton matcher's groups (detector.matching.Group)
+        all_matched = matched  # its persons before the person limit
         if person_ids is not None:
             ids, groups = group_by_ids(person_ids)
         elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
             boxes, scores, candidate = self._fit_boxes(boxes, scores, limit, why, candidate)
             heat, timings["match"], matched, unsure_groups = self._match_skeletons(
-                boxes, views, candidate, detected=scores[0] is not None, unsure=unsure
+                boxes, views, candidate, detected=scores[0] is not None, unsure=unsure is True
             )
+            all_matched = matched
             timings["pose"] += _ms(t0) - timings["match"]
             groups = [view_members(g) for g in matched]
             ids = list(range(len(groups)))
@@ -304,6 +309,17 @@ class ScenePipeline:
                 raise ValueError(f"the boxes make {len(groups)} persons, more than {why}")
             # Detector mode: the matcher lists multi-view groups first; the best-supported persons are kept.
             ids, groups, matched = ids[:limit], groups[:limit], matched[:limit]
+        if callable(unsure) and heat is not None and candidate is not None and scores[0] is not None:
+            # the persons as the tracker will see them; the unsure ones only if it asks for them
+            t1 = time.perf_counter()
+            sure = heat.estimate(members_of(matched, boxes))
+            has = np.asarray(sure.has_points, dtype=bool)
+            if unsure(np.asarray(sure.joints, np.float64)[has], np.asarray(sure.spread_mm, np.float64)[has]):
+                unsure_groups = group_unsure(
+                    heat, views, boxes, all_matched, candidate,
+                    self._skeleton_config(), self.config.max_match_combinations,
+                )  # fmt: skip
+            timings["match"] += _ms(t1)
         if unsure_groups:  # after the frame's persons, within the same limit
             unsure_groups = unsure_groups[: max(limit - len(groups), 0)]
             ids = ids + list(range(len(groups), len(groups) + len(unsure_groups)))
@@ -383,6 +399,11 @@ class ScenePipeline:
             return boxes, scores, None
         return split_unsure(boxes, scores, threshold)
 
+    def _skeleton_config(self) -> SkeletonMatchConfig:
+        """The skeleton matcher's thresholds (``skeletons-greedy``: its greedy rule)."""
+        config = self.config.skeleton_match or SkeletonMatchConfig()
+        return replace(config, link_reward_mm=None) if self.config.matcher == "skeletons-greedy" else config
+
     def _match_skeletons(
         self,
         boxes: list[np.ndarray],
@@ -400,9 +421,7 @@ class ScenePipeline:
         heat = self.pose.box_heatmaps(list(views), boxes)
         heat.reduce()  # the fusion's per-box softmax, needed whatever groups the boxes: the pose stage's
         t0 = time.perf_counter()
-        config = self.config.skeleton_match or SkeletonMatchConfig()
-        if self.config.matcher == "skeletons-greedy":
-            config = replace(config, link_reward_mm=None)
+        config = self._skeleton_config()
         groups = match_heatmaps(
             heat,
             views,

@@ -29,7 +29,7 @@ from service.pipeline import ScenePipeline, SceneResult
 from service.response import encode
 from service.schemas import Error, Health, ModelInfo, Ready, SceneOut, StreamEnded, StreamFrameOut
 from service.settings import Settings
-from service.streams import MAX_TIMESTAMP_S, check_stream_id, find_up, parse_timestamp
+from service.streams import MAX_TIMESTAMP_S, check_stream_id, parse_timestamp
 from service.validation import Limits, ValidatedScene, parse_scene, validate_scene
 
 public = APIRouter()
@@ -244,12 +244,14 @@ async def scene_result(
     scene_text: bytes,
     files: dict[str, bytes],
     t_start: float,
-    unsure: bool = False,
+    unsure: Callable[[ValidatedScene], object] | None = None,
 ) -> tuple[SceneResult, ValidatedScene, float]:
     """Decode and validate a frame's form parts, then run the pipeline on it (called holding an inference slot).
 
-    ``unsure``: also list the persons the detector was unsure of (``ScenePipeline.run``), for a stream's tracker.
-    Returns the result, the validated scene and the decoding time in ms (since ``t_start``, a perf_counter).
+    ``unsure``: a stream's hook, called with the validated scene in the pipeline's worker thread just before the
+    pipeline; it returns ``ScenePipeline.run``'s ``unsure`` (whether, or when, to list the persons the detector
+    was unsure of, for the stream's tracker). Returns the result, the validated scene and the decoding time in ms
+    (since ``t_start``, a perf_counter).
     """
     settings: Settings = request.app.state.settings
     limits = Limits(
@@ -269,7 +271,8 @@ async def scene_result(
 
     def infer() -> SceneResult:
         try:
-            return pipeline.run(scene.views, scene.boxes, scene.person_ids, unsure=unsure)
+            asked = False if unsure is None else unsure(scene)
+            return pipeline.run(scene.views, scene.boxes, scene.person_ids, unsure=asked)
         except InputError:
             raise
         except ValueError as exc:  # the models' own checks on what validation let through
@@ -347,10 +350,9 @@ async def post_stream_frame(
     timestamp_s = parse_timestamp(texts.get("timestamp_s"))
     async with inference_slot(request, settings), streams.frame(stream_id, timestamp_s, received) as frame:
         result, scene, decode_ms = await scene_result(
-            request, pipeline, scene_text, files, t_start, unsure=bool(settings.track_unsure_gate_mm)
+            request, pipeline, scene_text, files, t_start, unsure=frame.prepare
         )
-        floor = await find_up(frame.stream, scene) if scene.up is None and settings.track_floor_up else None
-        body = frame.answer(result, scene, decode_ms, t_start, floor)
+        body = frame.answer(result, scene, decode_ms, t_start)
     return Response(body, media_type="application/json")
 
 

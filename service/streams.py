@@ -14,7 +14,7 @@ adds a ``track_id`` and the smoothed joints to every person.
   from that first frame; one stream never mixes the two (409).
 - **Up.** The tracker leaves persons lying down untracked when it knows the room's up direction: the scene's
   ``up`` when it gives one, else (``ORPOSE_TRACK_FLOOR_UP``) the normal of the floor seen in the frame's depth
-  images (``posenet.rig.check.floor_of_frame``, some tens of ms in a worker thread), found once per stream and
+  images (``posenet.rig.check.floor_of_frame``, some tens of ms in the pipeline's worker thread), found once per stream and
   rig and kept; a frame that shows no floor leaves the rule off, and the stream looks again
   ``FLOOR_RETRY_FRAMES`` frames later. Each response says which it used (``stream.up``).
 - **Bounds.** At most ``ORPOSE_MAX_STREAMS`` streams are held; one more is a 503 with Retry-After (the time
@@ -122,9 +122,10 @@ def rig_key(scene: ValidatedScene) -> bytes:
     return b"".join(v.camera.extrinsics.to(torch.float64).numpy().tobytes() for v in scene.views)
 
 
-async def find_up(stream: Stream, scene: ValidatedScene) -> tuple[np.ndarray | None, Floor | None, float]:
+def find_up(stream: Stream, scene: ValidatedScene) -> tuple[np.ndarray | None, Floor | None, float]:
     """The room's up for a frame of ``stream`` whose scene gives none: the floor in its depth images
-    (``posenet.rig.check.floor_of_frame``, in a worker thread), or the stream's earlier look on the same rig.
+    (``posenet.rig.check.floor_of_frame``; call it in a worker thread), or the stream's earlier look on the same
+    rig.
 
     Returns (up (3,) or None, the look to keep (:meth:`Frame.answer` commits it; None: nothing new), ms)."""
     rig = rig_key(scene)
@@ -136,9 +137,7 @@ async def find_up(stream: Stream, scene: ValidatedScene) -> tuple[np.ndarray | N
     ):
         return last.up, None, 0.0
     t0 = time.perf_counter()
-    found = await anyio.to_thread.run_sync(
-        floor_of_frame, [v.camera for v in scene.views], [v.depth for v in scene.views]
-    )
+    found = floor_of_frame([v.camera for v in scene.views], [v.depth for v in scene.views])
     up = None if found is None else found[0].numpy()
     return up, Floor(rig, up, stream.frames), (time.perf_counter() - t0) * 1e3
 
@@ -156,7 +155,12 @@ class StreamRegistry:
         tracker: Callable[[], Tracker],
         retry_after_s: int = 1,
         now: Callable[[], float] = time.monotonic,
+        floor_up: bool = True,
+        unsure: bool = True,
     ) -> None:
+        """``floor_up``: find the room's up in the depth images for scenes without one (``ORPOSE_TRACK_FLOOR_UP``);
+        ``unsure``: give the trackers the persons the detector was unsure of, when they can use them."""
+        self.floor_up, self.unsure = floor_up, unsure
         self.max_streams = max_streams
         self.idle_s = idle_s
         self.tracker = tracker
@@ -212,7 +216,10 @@ class StreamRegistry:
         try:
             async with stream.lock:
                 clock = "server" if timestamp_s is None else "client"
-                yield Frame(stream, _frame_time(stream, clock, timestamp_s, received), clock, received)
+                yield Frame(
+                    stream, _frame_time(stream, clock, timestamp_s, received), clock, received, self.floor_up,
+                    self.unsure,
+                )  # fmt: skip
         finally:
             stream.users -= 1
             stream.last_used = self.now()
@@ -261,6 +268,24 @@ class Frame:
     time: float  # s, on the stream's clock
     clock: str  # "client" or "server"
     received: float  # the request's arrival, registry clock
+    floor_up: bool = True  # look for the floor when the scene gives no up
+    unsure: bool = True  # let the tracker continue tracks with persons the detector was unsure of
+    floor: tuple[np.ndarray | None, Floor | None, float] | None = None  # find_up's answer, for answer()
+
+    def prepare(self, scene: ValidatedScene):
+        """The frame's work before its pipeline runs, in the pipeline's worker thread (``service.routes.
+        scene_result``): the room's up (the scene's, else the floor's, :func:`find_up`), and what to tell
+        ``ScenePipeline.run`` about the unsure persons: list them only when the stream's tracker could give one
+        a track (``Tracker.needs_unsure`` on the frame's sure persons), which it rarely can; finding them costs
+        a few ms. The stream is only read here (its lock is held; it changes in :meth:`answer`)."""
+        up = scene.up
+        if up is None and self.floor_up:
+            self.floor = find_up(self.stream, scene)
+            up = self.floor[0]
+        if not self.unsure:
+            return False
+        tracker, t = self.stream.tracker, self.time
+        return lambda joints, spread: tracker.needs_unsure(joints, spread, t, up)
 
     def answer(
         self,
@@ -268,13 +293,10 @@ class Frame:
         scene: ValidatedScene,
         decode_ms: float,
         t_start: float,
-        floor: tuple[np.ndarray | None, Floor | None, float] | None = None,
     ) -> bytes:
         """Track ``result``'s persons, commit the frame to the stream, and return the response body.
 
-        ``floor``: :func:`find_up`'s answer for a scene without ``up`` (None: the rule has no up unless the scene
-        gives one). The stream changes only here, after every check has passed, so a rejected frame leaves it as
-        it was.
+        The stream changes only here, after every check has passed, so a rejected frame leaves it as it was.
         """
         t0 = time.perf_counter()
         out = scene_out(result, scene, decode_ms)  # 422 on a non-finite estimate, before the tracker sees it
@@ -282,6 +304,7 @@ class Frame:
         joints = np.array([p.joints for p in result.persons], np.float64).reshape(-1, len(JOINTS), 3)
         spread = np.array([p.spread_mm for p in result.persons], np.float64).reshape(-1, len(JOINTS))
         unsure = np.array([p.unsure for p in result.persons], bool)
+        floor = self.floor
         up, look, floor_ms = floor if floor is not None and scene.up is None else (scene.up, None, 0.0)
         up_source = "scene" if scene.up is not None else "floor" if up is not None else "none"
         t_track = time.perf_counter()

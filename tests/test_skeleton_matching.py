@@ -405,6 +405,19 @@ def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny
         assert all(s is None or s < threshold for s in p.scores)
         assert not taken & {(v, k) for v, ks in enumerate(p.box_indices) for k in ks}
     assert len(both.persons) > n, "the test frame should give a person of unsure boxes alone"
+    # asked through a function of the frame's persons (a stream's Tracker.needs_unsure): it sees them as they are
+    # answered, and its answer decides whether the unsure ones are found at all
+    seen = []
+
+    def ask(answer):
+        return lambda joints, spread: seen.append((joints, spread)) or answer
+
+    yes, no = low.run(views, unsure=ask(True)), low.run(views, unsure=ask(False))
+    np.testing.assert_array_equal(seen[0][0], np.array([p.joints for p in result.persons]).reshape(-1, 10, 3))
+    np.testing.assert_array_equal(seen[0][1], np.array([p.spread_mm for p in result.persons]).reshape(-1, 10))
+    assert [p.box_indices for p in yes.persons] == [p.box_indices for p in both.persons]
+    assert [p.box_indices for p in no.persons] == [p.box_indices for p in result.persons]
+    assert not any(p.unsure for p in no.persons)
 
 
 def test_association_reads_unsure_detections_as_the_service_does(tiny):

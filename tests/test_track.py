@@ -89,6 +89,35 @@ def test_a_one_frame_ghost_and_a_duplicate_never_get_an_id():
     assert tracker.next_id == 1
 
 
+def test_needs_unsure_says_when_unsure_persons_can_change_nothing():
+    """Tracker.needs_unsure (a stream skips finding the unsure persons when it is False): two trackers in lockstep,
+    one always given the frame's unsure persons, the other only when needs_unsure asks for them, answer the same
+    tracks and joints frame by frame, over persons who come and go, turn unsure, and leave unsure doubles behind;
+    and it does ask in some frames and not in others."""
+    truth = trajectories(3, 90)
+    rng = np.random.default_rng(1)
+    spread1 = np.full(NUM_JOINTS, SPREAD_PER_NOISE * 30.0)
+    full, lazy = Tracker(), Tracker()
+    asked = []
+    for f in range(90):
+        sure = [k for k in range(3) if not (k == 1 and 30 <= f < 50) and not (k == 2 and f >= 70)]
+        unsure = [k for k in range(3) if k not in sure and rng.random() < 0.8]  # unsure instead, mostly
+        unsure += [0] if f % 7 == 0 else []  # and now and then an unsure double of person 0
+        obs = truth[sure + unsure, f] + rng.normal(0, 30.0, (len(sure) + len(unsure), NUM_JOINTS, 3))
+        spread = np.tile(spread1, (len(obs), 1))
+        mask = np.arange(len(obs)) >= len(sure)
+        need = lazy.needs_unsure(obs[~mask], spread[~mask], f / FPS)
+        asked.append(need)
+        a = full.update(obs, spread, f / FPS, mask)
+        b = lazy.update(obs if need else obs[~mask], spread if need else spread[~mask], f / FPS,
+                        mask if need else None)  # fmt: skip
+        assert [p.track_id for p in a] == [p.track_id for p in b] + ([] if need else [None] * mask.sum()), f
+        np.testing.assert_array_equal(
+            np.array([p.joints for p in a[: len(b)]]), np.array([p.joints for p in b])
+        )
+    assert any(asked) and not all(asked), asked
+
+
 def test_an_unsure_person_continues_a_track_but_never_starts_one():
     """Persons the detector was unsure of come second: one keeps its confirmed track (a person half behind a
     monitor), one near a track that a sure person took gets none, and alone they never make a track."""
