@@ -129,6 +129,49 @@ def test_the_floor_of_a_rendered_frame_gives_the_room_s_up(sequence):
     )  # ceiling-mounted
 
 
+def test_a_stream_looks_for_the_floor_once_per_rig_and_again_later_when_none_was_seen(sequence):
+    """service.streams.find_up: a frame whose depth shows nothing finds no floor (the height rule stays off) and the
+    stream does not look again until FLOOR_RETRY_FRAMES frames later; a floor found is kept for the rig, and
+    another rig (other extrinsics) is looked at afresh."""
+    from dataclasses import replace
+
+    import torch
+
+    from posenet.scene import SceneView
+    from posenet.track import Tracker
+    from service.streams import FLOOR_RETRY_FRAMES, Stream, find_up
+    from service.validation import ValidatedScene
+
+    s = MvorDataset(sequence.root, sequence.gt)[0]
+    seen = ValidatedScene([SceneView(None, v.depth, v.camera) for v in s.views], None, None)
+    blind = ValidatedScene([SceneView(None, np.zeros_like(v.depth), v.camera) for v in s.views], None, None)
+    stream = Stream("s", Tracker(), 0.0)
+
+    def commit(answer):  # what Frame.answer does with the look, and one more frame taken
+        if answer[1] is not None:
+            stream.floor = answer[1]
+        stream.frames += 1
+        return answer
+
+    up, look, ms = commit(find_up(stream, blind))
+    assert up is None and look is not None and ms > 0
+    for _ in range(FLOOR_RETRY_FRAMES - 1):  # not looked at again for a while, even when the floor shows now
+        assert commit(find_up(stream, seen))[:2] == (None, None)
+    up, look, _ = commit(find_up(stream, seen))  # then it looks again, and finds it
+    assert look is not None and float(up @ s.up) > np.cos(np.radians(0.5))
+    assert commit(find_up(stream, seen))[1:] == (None, 0.0)  # kept: no new look
+    moved = [
+        SceneView(None, v.depth, replace(v.camera, extrinsics=v.camera.extrinsics.clone()))
+        for v in seen.views
+    ]
+    shift = torch.eye(4, dtype=moved[0].camera.extrinsics.dtype)
+    shift[0, 3] = 100.0  # another rig: all cameras 10 cm along x
+    moved = [
+        SceneView(None, v.depth, replace(v.camera, extrinsics=shift @ v.camera.extrinsics)) for v in moved
+    ]
+    assert commit(find_up(stream, ValidatedScene(moved, None, None)))[1] is not None
+
+
 def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequence):
     answers = [ok(frame(server, "seq-a", sequence, k, t)) for k, t in enumerate(sequence.times)]
     try:
