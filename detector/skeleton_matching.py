@@ -359,6 +359,19 @@ def _in_full_lists(groups: list[Group], subset: Sequence[np.ndarray]) -> list[Gr
     ]  # fmt: skip
 
 
+def unsure_left(groups: Sequence[Group], candidate: Sequence[np.ndarray] | None) -> list[np.ndarray] | None:
+    """Per view ``(K_v,)`` bool, the unsure boxes (``candidate``) that no person of ``groups`` holds; None when
+    there are none (then :func:`group_unsure` finds nobody)."""
+    if candidate is None:
+        return None
+    left = [np.asarray(c, bool).reshape(-1).copy() for c in candidate]
+    for g in groups:
+        for v, k in [*enumerate(g.indices), *g.extra]:
+            if k >= 0:
+                left[v][k] = False
+    return left if any(m.any() for m in left) else None
+
+
 def group_unsure(
     heat,
     views: Sequence[SceneView],
@@ -373,16 +386,10 @@ def group_unsure(
     have seen them (step 7); fuse them with ``heat.estimate(members_of(unsure, boxes))``.
 
     They are no person of the frame on their own: a tracker may take one to continue a track it already has."""
-    if candidate is None:
+    left = unsure_left(groups, candidate)
+    if left is None:
         return []
     config = config or SkeletonMatchConfig()
-    left = [np.asarray(c, bool).reshape(-1).copy() for c in candidate]
-    for g in groups:
-        for v, k in [*enumerate(g.indices), *g.extra]:
-            if k >= 0:
-                left[v][k] = False
-    if not any(m.any() for m in left):
-        return []
     joints, ok = _lifted(heat.single_view())  # (N, J, 3), (N, J)
     flat = np.concatenate(left)
     unsure = match_skeletons(

@@ -212,6 +212,18 @@ class BoxHeatmaps:
             torch.from_numpy(np.all(has_points, 0)),
         )
 
+    def joint_bounds(self, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """Per joint the axis-aligned box ``(lo (J, 3), hi (J, 3))``, mm, around the softmax means of ``boxes``
+        (box numbers, or an (N,) bool mask) in every pass: any person fused from some of them lies inside it (a
+        fused joint is a weighted mean of its boxes' means, averaged over the passes). None without the 3D
+        aggregation or without boxes."""
+        if not all(p.points is not None for p in self.passes):
+            return None
+        means = np.stack([p.moments(self.eps)[1].numpy()[boxes] for p in self.passes])  # (passes, n, J, 3)
+        if not means.shape[1]:
+            return None
+        return means.min((0, 1)), means.max((0, 1))
+
     def single_view(self) -> JointEstimate:
         """Each box lifted alone: joints (N, J, 3), confidence (N, J), has_points (N,); computed once (the
         matcher reads it again for the boxes it left over), so treat it as read-only."""

@@ -339,12 +339,20 @@ class Tracker:
         return track_of
 
     def needs_unsure(
-        self, joints: np.ndarray, spread: np.ndarray, timestamp_s: float, up: np.ndarray | None = None
+        self,
+        joints: np.ndarray,
+        spread: np.ndarray,
+        timestamp_s: float,
+        up: np.ndarray | None = None,
+        within: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> bool:
         """Whether :meth:`update` at ``timestamp_s`` could give a person the detector was unsure of a track, when
         the frame's sure persons are ``joints (P, J, 3)`` / ``spread (P, J)``: whether a confirmed track is left
         that none of them takes (the first pass of :meth:`update`, on the predicted joints; the tracker does not
-        change). When it is False, unsure persons change nothing, so a caller may skip finding them."""
+        change) and, given ``within`` (per joint the box ``(lo (J, 3), hi (J, 3))`` that every unsure person's
+        joints lie in, ``BoxHeatmaps.joint_bounds``), that the box comes within ``unsure_gate_mm`` of it (the mean
+        over joints of each joint's distance to its box is a lower bound of the distance to any unsure person).
+        When it is False, unsure persons change nothing, so a caller may skip finding them."""
         c = self.config
         confirmed = self.ids >= 0
         if c.unsure_gate_mm is None or not confirmed.any():
@@ -352,12 +360,16 @@ class Tracker:
         if self.time is not None and not timestamp_s > self.time:
             return True  # update will refuse the frame; nothing to save
         joints, spread = self._persons(joints, spread)
-        if not len(joints):
-            return True
         decay = np.where(self.unseen > 0, c.coast_velocity_decay, 1.0)[:, None, None]
         pos = self.pos + self.vel * decay * (timestamp_s - self.time)  # as _predict
         track_of = self._claims(mean_joint_distance(pos, joints), self._usable(joints, spread, up))
-        return bool((confirmed & ~np.isin(np.arange(self.num_tracks), track_of)).any())
+        left = confirmed & ~np.isin(np.arange(self.num_tracks), track_of)
+        if within is None or not left.any():
+            return bool(left.any())
+        lo, hi = (np.asarray(b, float) for b in within)
+        nearest = np.clip(pos[left], lo, hi)  # (T', J, 3): each joint's nearest point of its box
+        bound = np.linalg.norm(pos[left] - nearest, axis=-1).mean(-1)  # (T',) mm
+        return bool((bound <= c.unsure_gate_mm + 1.0).any())  # 1 mm for the persons' float32 rounding
 
     def update(
         self,

@@ -30,6 +30,7 @@ from detector.skeleton_matching import (
     match_heatmaps,
     members_of,
     split_unsure,
+    unsure_left,
     view_members,
 )
 from posenet.boxes import ground_truth_ids, hull, identified
@@ -267,8 +268,10 @@ class ScenePipeline:
             unsure: also list, after the frame's persons, those of boxes the detector was unsure of in every
                 view (``PersonResult.unsure``; detector mode with the skeleton matcher and unsure boxes on),
                 for a tracker: they are no persons of the frame on their own. A function of the frame's persons
-                (joints (P, J, 3) mm, spreads (P, J) mm) lists them only when it says so (a stream asks its
-                tracker: ``posenet.track.Tracker.needs_unsure``), and skips finding them otherwise.
+                (joints (P, J, 3) mm, spreads (P, J) mm) and of the box their joints would lie in (per joint ``(lo
+                (J, 3), hi (J, 3))``, ``BoxHeatmaps.joint_bounds`` of the unsure boxes left over, or None) lists
+                them only when it says so (a stream asks its tracker: ``posenet.track.Tracker.needs_unsure``), and
+                skips finding them otherwise.
         """
         if not views:
             raise ValueError("a scene needs at least one view")
@@ -312,9 +315,14 @@ class ScenePipeline:
         if callable(unsure) and heat is not None and candidate is not None and scores[0] is not None:
             # the persons as the tracker will see them; the unsure ones only if it asks for them
             t1 = time.perf_counter()
-            sure = heat.estimate(members_of(matched, boxes))
-            has = np.asarray(sure.has_points, dtype=bool)
-            if unsure(np.asarray(sure.joints, np.float64)[has], np.asarray(sure.spread_mm, np.float64)[has]):
+            left = unsure_left(all_matched, candidate)  # no unsure box left: nobody to find
+            sure = heat.estimate(members_of(matched, boxes)) if left is not None else None
+            has = None if sure is None else np.asarray(sure.has_points, dtype=bool)
+            if sure is not None and unsure(
+                np.asarray(sure.joints, np.float64)[has],
+                np.asarray(sure.spread_mm, np.float64)[has],
+                heat.joint_bounds(np.concatenate(left)),
+            ):
                 unsure_groups = group_unsure(
                     heat, views, boxes, all_matched, candidate,
                     self._skeleton_config(), self.config.max_match_combinations,

@@ -285,7 +285,7 @@ class Frame:
         if not self.unsure:
             return False
         tracker, t = self.stream.tracker, self.time
-        return lambda joints, spread: tracker.needs_unsure(joints, spread, t, up)
+        return lambda joints, spread, within: tracker.needs_unsure(joints, spread, t, up, within)
 
     def answer(
         self,

@@ -410,7 +410,7 @@ def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny
     seen = []
 
     def ask(answer):
-        return lambda joints, spread: seen.append((joints, spread)) or answer
+        return lambda joints, spread, within: seen.append((joints, spread, within)) or answer
 
     yes, no = low.run(views, unsure=ask(True)), low.run(views, unsure=ask(False))
     np.testing.assert_array_equal(seen[0][0], np.array([p.joints for p in result.persons]).reshape(-1, 10, 3))
@@ -418,6 +418,10 @@ def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny
     assert [p.box_indices for p in yes.persons] == [p.box_indices for p in both.persons]
     assert [p.box_indices for p in no.persons] == [p.box_indices for p in result.persons]
     assert not any(p.unsure for p in no.persons)
+    # the box it is given holds every person of unsure boxes that the frame can give (BoxHeatmaps.joint_bounds)
+    lo, hi = seen[0][2]
+    for p in both.persons[n:]:
+        assert ((p.joints >= lo - 1e-3) & (p.joints <= hi + 1e-3)).all()
 
 
 def test_association_reads_unsure_detections_as_the_service_does(tiny):

@@ -97,8 +97,8 @@ def test_needs_unsure_says_when_unsure_persons_can_change_nothing():
     truth = trajectories(3, 90)
     rng = np.random.default_rng(1)
     spread1 = np.full(NUM_JOINTS, SPREAD_PER_NOISE * 30.0)
-    full, lazy = Tracker(), Tracker()
-    asked = []
+    full, lazy, boxed = Tracker(), Tracker(), Tracker()
+    asked, asked_boxed = [], []
     for f in range(90):
         sure = [k for k in range(3) if not (k == 1 and 30 <= f < 50) and not (k == 2 and f >= 70)]
         unsure = [k for k in range(3) if k not in sure and rng.random() < 0.8]  # unsure instead, mostly
@@ -108,14 +108,24 @@ def test_needs_unsure_says_when_unsure_persons_can_change_nothing():
         mask = np.arange(len(obs)) >= len(sure)
         need = lazy.needs_unsure(obs[~mask], spread[~mask], f / FPS)
         asked.append(need)
-        a = full.update(obs, spread, f / FPS, mask)
-        b = lazy.update(obs if need else obs[~mask], spread if need else spread[~mask], f / FPS,
-                        mask if need else None)  # fmt: skip
-        assert [p.track_id for p in a] == [p.track_id for p in b] + ([] if need else [None] * mask.sum()), f
-        np.testing.assert_array_equal(
-            np.array([p.joints for p in a[: len(b)]]), np.array([p.joints for p in b])
+        # told where the unsure persons' joints lie (a box around them, as BoxHeatmaps.joint_bounds gives)
+        within = (obs[mask].min(0), obs[mask].max(0)) if mask.any() else None
+        need_boxed = within is not None and boxed.needs_unsure(
+            obs[~mask], spread[~mask], f / FPS, within=within
         )
+        asked_boxed.append(need_boxed)
+        a = full.update(obs, spread, f / FPS, mask)
+        for tracker, ask in ((lazy, need), (boxed, need_boxed)):
+            b = tracker.update(obs if ask else obs[~mask], spread if ask else spread[~mask], f / FPS,
+                               mask if ask else None)  # fmt: skip
+            assert [p.track_id for p in a] == [p.track_id for p in b] + (
+                [] if ask else [None] * mask.sum()
+            ), f
+            np.testing.assert_array_equal(
+                np.array([p.joints for p in a[: len(b)]]), np.array([p.joints for p in b])
+            )
     assert any(asked) and not all(asked), asked
+    assert any(asked_boxed) and sum(asked_boxed) < sum(asked), (asked_boxed, asked)
 
 
 def test_an_unsure_person_continues_a_track_but_never_starts_one():
