@@ -39,20 +39,33 @@ def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -
     """Run the pipeline in detector mode on every frame of ``data`` and write one JSON line per frame."""
     from posenet.predict import read_dataset
     from posenet.scene import views_of
+    from posenet.track import Tracker
     from service.pipeline import ScenePipeline
+    from service.streams import Stream, find_up
+    from service.validation import ValidatedScene
 
     pipe = ScenePipeline.from_checkpoints(backend=backend, threads=threads)
     # The views as the service decodes them (tests/test_parity.py): the persons equal the served ones.
     ds = read_dataset(data, gt, pipe.read_size)
+    # Without a room frame in the file, the room's up comes from the floor, looked for as a stream does it (once
+    # per sequence and rig, again later when none was seen; service.streams.find_up).
+    looks = {} if room_up(gt) is None else None
+    sequence_of = {mv["id"]: mv.get("sequence") for mv in gt["multiview_images"]}
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out, "w") as f:
         for i in tqdm(range(len(ds)), desc="pipeline", unit="frame"):
             sample = ds[i]
             t0 = time.perf_counter()
             result = pipe.run(views_of(sample), unsure=True)
+            up = None
+            if looks is not None:
+                stream = looks.setdefault(sequence_of.get(sample.id), Stream("offline", Tracker(), 0.0))
+                up, look, _ = find_up(stream, ValidatedScene(views_of(sample), None, None))
+                stream.floor, stream.frames = look or stream.floor, stream.frames + 1
             record = {
                 "id": sample.id,
                 "seconds": round(time.perf_counter() - t0, 3),
+                **({} if looks is None else {"up": None if up is None else up.tolist()}),
                 "persons": [
                     {
                         "joints": p.joints.round(2).tolist(),
@@ -72,7 +85,7 @@ def sequences(
     """Per sequence, its frames in time order, each ``(frame id, frame)``: ground truth (person ids and joints)
     and the pipeline's persons (``detections``; none without them, e.g. to score the service's own tracks),
     among them those the detector was unsure of (tracked only with ``TrackerConfig.unsure_gate_mm``)."""
-    up = room_up(gt)  # as the client sends it
+    up = room_up(gt)  # as the client sends it; else the floor the pipeline's run found (detect)
     poses = defaultdict(list)
     for pose in gt["annotations3D"]:
         poses[pose["image_ids"]].append(pose)
@@ -91,7 +104,9 @@ def sequences(
             joints=np.array([p["joints"] for p in det], float).reshape(-1, 10, 3),
             spread=np.array([p["spread_mm"] for p in det], float).reshape(-1, 10),
             unsure=np.array([p.get("unsure", False) for p in det], bool),
-            up=up,
+            up=up
+            if up is not None or detections is None or detections[mv["id"]].get("up") is None
+            else np.asarray(detections[mv["id"]]["up"], float),
         )
         out[mv["sequence"]].append((mv["id"], frame))
     for rows in out.values():

@@ -172,6 +172,32 @@ def test_a_stream_looks_for_the_floor_once_per_rig_and_again_later_when_none_was
     assert commit(find_up(stream, ValidatedScene(moved, None, None)))[1] is not None
 
 
+def test_the_offline_benchmark_finds_the_floor_as_a_stream_does(sequence, tmp_path, monkeypatch):
+    """benchmarks/tracking.py on a file without a room frame: each frame's cached persons carry the up the stream
+    would have found (the floor's, the room frame's up within half a degree), and the tracker is given it; with a
+    room frame nothing is looked for."""
+    import copy
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    sys.modules.pop("tracking", None)
+    from tracking import detect, sequences
+
+    from posenet.data.mvor import room_up
+
+    plain = copy.deepcopy(sequence.gt)
+    del plain["cameras_info"]["camParams"]["firstCamToRoomRef"]
+    assert room_up(plain) is None
+    detect(sequence.root, plain, tmp_path / "plain.jsonl", "torch", 1)
+    lines = {r["id"]: r for r in map(json.loads, (tmp_path / "plain.jsonl").read_text().splitlines())}
+    truth = room_up(sequence.gt)
+    assert all(float(np.asarray(r["up"]) @ truth) > np.cos(np.radians(0.5)) for r in lines.values())
+    frames = [f for rows in sequences(plain, lines).values() for _, f in rows]
+    assert len(frames) == FRAMES and all(float(f.up @ truth) > np.cos(np.radians(0.5)) for f in frames)
+    detect(sequence.root, sequence.gt, tmp_path / "room.jsonl", "torch", 1)
+    assert not any("up" in json.loads(line) for line in (tmp_path / "room.jsonl").read_text().splitlines())
+
+
 def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequence):
     answers = [ok(frame(server, "seq-a", sequence, k, t)) for k, t in enumerate(sequence.times)]
     try:
