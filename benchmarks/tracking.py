@@ -214,6 +214,10 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"sequence {seq}: {figures['frames']} frames")
         for line in goal_lines(figures):
             print("  " + line)
+    print(
+        "(track_ms is the tracker's update alone; a stream also groups the boxes the detector was unsure of when "
+        "its tracker can use them, counted in timings.match: docs/tracking.md, 'What tracking costs a stream frame')"
+    )
     print(report["machine"])
     report["goals"] = GOALS
     if args.json:
