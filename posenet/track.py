@@ -263,11 +263,14 @@ class Tracker:
         for name in ("pos", "vel", "cov", "ids", "hits", "unseen_s", "unseen", "bones", "frames_seen"):
             setattr(self, name, getattr(self, name)[keep])
 
+    def _moved(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """The tracks' velocities and joints ``dt`` s on (an unseen track slows down), without changing them."""
+        vel = self.vel * np.where(self.unseen > 0, self.config.coast_velocity_decay, 1.0)[:, None, None]
+        return vel, self.pos + vel * dt
+
     def _predict(self, dt: float) -> None:
         c = self.config
-        decay = np.where(self.unseen > 0, c.coast_velocity_decay, 1.0)[:, None, None]
-        self.vel = self.vel * decay
-        self.pos = self.pos + self.vel * dt
+        self.vel, self.pos = self._moved(dt)
         F = np.array([[1.0, dt], [0.0, 1.0]])
         q = c.accel_noise_mm_s2**2
         Q = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
@@ -360,8 +363,7 @@ class Tracker:
         if self.time is not None and not timestamp_s > self.time:
             return True  # update will refuse the frame; nothing to save
         joints, spread = self._persons(joints, spread)
-        decay = np.where(self.unseen > 0, c.coast_velocity_decay, 1.0)[:, None, None]
-        pos = self.pos + self.vel * decay * (timestamp_s - self.time)  # as _predict
+        pos = self._moved(timestamp_s - self.time)[1]  # where update will predict the tracks
         track_of = self._claims(mean_joint_distance(pos, joints), self._usable(joints, spread, up))
         left = confirmed & ~np.isin(np.arange(self.num_tracks), track_of)
         if within is None or not left.any():

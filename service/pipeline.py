@@ -295,8 +295,8 @@ class ScenePipeline:
             ids, groups = group_by_ids(person_ids)
         elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
             boxes, scores, candidate = self._fit_boxes(boxes, scores, limit, why, candidate)
-            heat, timings["match"], matched, unsure_groups = self._match_skeletons(
-                boxes, views, candidate, detected=scores[0] is not None, unsure=unsure is True
+            heat, timings["match"], matched = self._match_skeletons(
+                boxes, views, candidate, detected=scores[0] is not None
             )
             all_matched = matched
             timings["pose"] += _ms(t0) - timings["match"]
@@ -312,17 +312,12 @@ class ScenePipeline:
                 raise ValueError(f"the boxes make {len(groups)} persons, more than {why}")
             # Detector mode: the matcher lists multi-view groups first; the best-supported persons are kept.
             ids, groups, matched = ids[:limit], groups[:limit], matched[:limit]
-        if callable(unsure) and heat is not None and candidate is not None and scores[0] is not None:
-            # the persons as the tracker will see them; the unsure ones only if it asks for them
+        left = (
+            None if not unsure or heat is None or scores[0] is None else unsure_left(all_matched, candidate)
+        )
+        if left is not None:  # unsure boxes no person took: their persons, for a tracker (when it asks)
             t1 = time.perf_counter()
-            left = unsure_left(all_matched, candidate)  # no unsure box left: nobody to find
-            sure = heat.estimate(members_of(matched, boxes)) if left is not None else None
-            has = None if sure is None else np.asarray(sure.has_points, dtype=bool)
-            if sure is not None and unsure(
-                np.asarray(sure.joints, np.float64)[has],
-                np.asarray(sure.spread_mm, np.float64)[has],
-                heat.joint_bounds(np.concatenate(left)),
-            ):
+            if not callable(unsure) or self._asks(unsure, heat, matched, boxes, left):
                 unsure_groups = group_unsure(
                     heat, views, boxes, all_matched, candidate,
                     self._skeleton_config(), self.config.max_match_combinations,
@@ -407,6 +402,18 @@ class ScenePipeline:
             return boxes, scores, None
         return split_unsure(boxes, scores, threshold)
 
+    @staticmethod
+    def _asks(unsure, heat, matched, boxes, left) -> bool:
+        """``run``'s ``unsure`` function asked about the frame's persons as they will be answered (fused, those
+        with points) and the box the leftover unsure boxes' persons would lie in."""
+        sure = heat.estimate(members_of(matched, boxes))
+        has = np.asarray(sure.has_points, dtype=bool)
+        return unsure(
+            np.asarray(sure.joints, np.float64)[has],
+            np.asarray(sure.spread_mm, np.float64)[has],
+            heat.joint_bounds(np.concatenate(left)),
+        )
+
     def _skeleton_config(self) -> SkeletonMatchConfig:
         """The skeleton matcher's thresholds (``skeletons-greedy``: its greedy rule)."""
         config = self.config.skeleton_match or SkeletonMatchConfig()
@@ -418,33 +425,25 @@ class ScenePipeline:
         views: list[SceneView],
         candidate=None,
         detected: bool = False,
-        unsure: bool = False,
     ):
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
-        Returns ``(heat, match_ms, groups, unsure_groups)``: the heatmaps to fuse from, the milliseconds of the
-        association (after the U-Net and each box's softmax moments, which the fusion needs with any grouping),
-        the persons (``detector.matching.Group``), and with ``unsure`` the groups of the unsure boxes left over
-        (``group_unsure``; else none)."""
+        Returns ``(heat, match_ms, groups)``: the heatmaps to fuse from, the milliseconds of the association (after
+        the U-Net and each box's softmax moments, which the fusion needs with any grouping), and the persons
+        (``detector.matching.Group``)."""
         heat = self.pose.box_heatmaps(list(views), boxes)
         heat.reduce()  # the fusion's per-box softmax, needed whatever groups the boxes: the pose stage's
         t0 = time.perf_counter()
-        config = self._skeleton_config()
         groups = match_heatmaps(
             heat,
             views,
             boxes,
-            config,
+            self._skeleton_config(),
             max_combinations=self.config.max_match_combinations,
             candidate=candidate,
             detected=detected,
         )
-        left = []
-        if unsure and detected:
-            left = group_unsure(
-                heat, views, boxes, groups, candidate, config, self.config.max_match_combinations
-            )
-        return heat, _ms(t0), groups, left
+        return heat, _ms(t0), groups
 
     # ----------------------------------------------------------------------------------------- offline
     def run_sample(self, sample: Sample, reference_boxes: bool = True) -> tuple[SceneResult, list[dict]]:

@@ -270,7 +270,9 @@ class Frame:
     received: float  # the request's arrival, registry clock
     floor_up: bool = True  # look for the floor when the scene gives no up
     unsure: bool = True  # let the tracker continue tracks with persons the detector was unsure of
-    floor: tuple[np.ndarray | None, Floor | None, float] | None = None  # find_up's answer, for answer()
+    up: np.ndarray | None = None  # the room's up the tracker uses (prepare: the scene's, else the floor's)
+    look: Floor | None = None  # a new look for the floor, which answer() keeps
+    floor_ms: float = 0.0  # what that look cost
 
     def prepare(self, scene: ValidatedScene):
         """The frame's work before its pipeline runs, in the pipeline's worker thread (``service.routes.
@@ -278,13 +280,12 @@ class Frame:
         ``ScenePipeline.run`` about the unsure persons: list them only when the stream's tracker could give one
         a track (``Tracker.needs_unsure`` on the frame's sure persons), which it rarely can; finding them costs
         a few ms. The stream is only read here (its lock is held; it changes in :meth:`answer`)."""
-        up = scene.up
-        if up is None and self.floor_up:
-            self.floor = find_up(self.stream, scene)
-            up = self.floor[0]
+        self.up = scene.up
+        if self.up is None and self.floor_up:
+            self.up, self.look, self.floor_ms = find_up(self.stream, scene)
         if not self.unsure:
             return False
-        tracker, t = self.stream.tracker, self.time
+        tracker, t, up = self.stream.tracker, self.time, self.up
         return lambda joints, spread, within: tracker.needs_unsure(joints, spread, t, up, within)
 
     def answer(
@@ -304,16 +305,14 @@ class Frame:
         joints = np.array([p.joints for p in result.persons], np.float64).reshape(-1, len(JOINTS), 3)
         spread = np.array([p.spread_mm for p in result.persons], np.float64).reshape(-1, len(JOINTS))
         unsure = np.array([p.unsure for p in result.persons], bool)
-        floor = self.floor
-        up, look, floor_ms = floor if floor is not None and scene.up is None else (scene.up, None, 0.0)
-        up_source = "scene" if scene.up is not None else "floor" if up is not None else "none"
+        up_source = "scene" if scene.up is not None else "floor" if self.up is not None else "none"
         t_track = time.perf_counter()
-        tracked = stream.tracker.update(joints, spread, self.time, unsure, up)
+        tracked = stream.tracker.update(joints, spread, self.time, unsure, self.up)
         track_ms = (time.perf_counter() - t_track) * 1e3
         if stream.clock is None:
             stream.clock, stream.origin = self.clock, self.received
-        if look is not None:
-            stream.floor = look
+        if self.look is not None:
+            stream.floor = self.look
         stream.frames += 1
         stream.last_time = self.time
         # A person the detector was unsure of is answered only when it continues a track; the persons before it
@@ -336,7 +335,7 @@ class Frame:
             mode=out.mode,
             persons=persons,
             notes=out.notes,
-            timings=StreamTimings(**out.timings.model_dump(), track=track_ms, floor=floor_ms),
+            timings=StreamTimings(**out.timings.model_dump(), track=track_ms, floor=self.floor_ms),
             stream=StreamState(
                 id=stream.id, frames=stream.frames, timestamp_s=self.time, clock=stream.clock, up=up_source
             ),
