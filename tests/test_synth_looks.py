@@ -24,7 +24,7 @@ from posenet.data.synth.looks import (
 )
 from posenet.data.synth.raster import GBuffer, Intrinsics
 from posenet.data.synth.scene import Person, render_frame
-from posenet.data.synth.sensor import DepthSensorConfig, simulate_depth
+from posenet.data.synth.sensor import ColourSensorConfig, DepthSensorConfig, simulate_depth
 from posenet.data.synth.skeleton_full import F
 from posenet.data.synth.twin import load_twin, twin_frame
 from posenet.data.synth.writer import frame_rng
@@ -206,6 +206,40 @@ def test_alt_is_one_fixed_look_outside_what_random_draws():
         assert z > drawn[:, F[joint], 2].max() or z < drawn[:, F[joint], 2].min()
 
 
+@needs_mvor
+def test_look_parts_take_one_part_and_leave_the_rest_as_the_twin_renders_it():
+    ctx = load_twin(json.loads(MVOR_JSON.read_text()))
+    info = ctx.frames[300]
+
+    def build(parts):
+        rng = frame_rng(0, "twin", info.day, info.frame)
+        return twin_frame(
+            ctx, info, rng, make_look("alt", frame_rng(0, "twin", info.day, info.frame, 2), parts)
+        )
+
+    twin, _ = twin_frame(ctx, info, frame_rng(0, "twin", info.day, info.frame))
+    whole, _ = build(None)
+    same_as_whole, _ = build(["body", "clothes", "colour", "depth", "occluders"])
+    assert repr(same_as_whole.look) == repr(whole.look) and len(same_as_whole.room) == len(whole.room)
+    depth, stats = build(["depth"])
+    assert len(depth.room) == len(twin.room) < len(whole.room)  # no occluders of its own
+    assert depth.look.depth.model == "tof" and depth.look.colour == ColourSensorConfig()
+    assert repr(depth.lighting) == repr(twin.lighting) and stats["clutter"] == 0
+    assert [p.shape for p in depth.persons] == [p.shape for p in twin.persons]
+    assert [p.outfit for p in depth.persons] == [p.outfit for p in twin.persons]
+    colour, _ = build("colour")
+    assert colour.look.depth == DepthSensorConfig() and colour.look.colour.diffuse == "half_lambert"
+    assert repr(colour.lighting) == repr(whole.lighting) != repr(twin.lighting)
+    body, _ = build(["body"])
+    assert body.look is None and all(p.shape is ALT_SHAPE for p in body.persons if p.person_id >= 0)
+    assert [p.outfit for p in body.persons] == [p.outfit for p in twin.persons]
+    clothes, _ = build(["clothes"])
+    assert [p.shape for p in clothes.persons] == [p.shape for p in twin.persons]
+    assert [p.outfit for p in clothes.persons] != [p.outfit for p in twin.persons]
+    with pytest.raises(ValueError, match="unknown look part"):
+        build(["shoes"])
+
+
 def _wall(z: float, H: int = 96, W: int = 128) -> tuple[GBuffer, Intrinsics]:
     normal = np.zeros((3, H, W), np.float32)
     normal[2] = -1
@@ -275,3 +309,39 @@ def test_multipath_pushes_the_room_back_near_its_edges_only():
     assert bias.min() >= -1 and bias.max() <= 51
     near, far = both & (edges < 150), both & (edges > 1200)
     assert (d1 - d0)[near].mean() > 30 and (d1 - d0)[far].mean() < 3
+
+
+def test_the_body_grammar_builds_varied_bodies_the_same_every_frame():
+    from posenet.data.synth.body_grammar import grammar_primitives
+    from posenet.data.synth.looks import GRAMMAR_SHARE
+    from posenet.data.synth.scene import frame_primitives
+    from posenet.data.synth.skeleton_full import complete_legs
+
+    ctx = load_twin(json.loads(MVOR_JSON.read_text())) if MVOR_JSON.is_file() else None
+    rng = np.random.default_rng(0)
+    shapes = [random_shape(rng) for _ in range(200)]
+    grammar = [s for s in shapes if s.model == "grammar"]
+    assert abs(len(grammar) / len(shapes) - GRAMMAR_SHARE) < 0.1
+    assert len({s.grammar for s in grammar}) == len(grammar)  # a body of its own each
+    if ctx is None:
+        pytest.skip("MVOR annotations not found")
+    info = ctx.frames[300]
+    kp = info.poses[0][1]
+    points = complete_legs(kp[:, :3] @ ctx.cam0_to_world[:3, :3].T + ctx.cam0_to_world[:3, 3])
+    outfit = random_outfit(np.random.default_rng(1))
+    kinds = set()
+    for shape in grammar[:30]:
+        prims = grammar_primitives(points, outfit, 0, shape)
+        again = grammar_primitives(points, outfit, 0, shape)
+        assert repr(prims) == repr(again)  # the same body in every frame of a sequence
+        assert all(p.owner == 0 for p in prims) and 15 <= len(prims) <= 70
+        kinds.add(tuple(sorted({p.kind for p in prims})))
+        centre = np.mean([p.center for p in prims], 0)
+        assert np.linalg.norm(centre - points[:12].mean(0)) < 400  # built around the skeleton
+    assert len(kinds) > 3  # trunks, limbs and heads of different kinds
+    person = Person(points, outfit, 0, shape=grammar[0])
+    frame, _ = twin_frame(ctx, info, frame_rng(0, "twin", info.day, info.frame))
+    frame.persons = [person]
+    assert repr(frame_primitives(frame)[len(frame.room) :]) == repr(
+        grammar_primitives(points, outfit, 0, grammar[0])
+    )

@@ -21,7 +21,7 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
-from posenet.data.synth.looks import LOOKS
+from posenet.data.synth.looks import LOOKS, PARTS
 from posenet.data.synth.writer import SynthConfig, generate
 
 DEFAULT_MVOR = Path(__file__).resolve().parents[3] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
@@ -98,6 +98,16 @@ def build_parser() -> argparse.ArgumentParser:
         "occluders drawn per scene and person (to train on); alt: one fixed other look, never trained on "
         "(default: random for --scenes, twin for --from-mvor, whose numbers it reproduces)",
     )
+    p.add_argument(
+        "--look-parts",
+        nargs="+",
+        choices=PARTS,
+        default=None,
+        metavar="PART",
+        help=f"take only these parts of --look and render the rest as the twin does ({', '.join(PARTS)}); "
+        "e.g. --look alt --look-parts depth is the twin seen by the alt look's depth sensor "
+        "(benchmarks/look_factors.py; default: the whole look)",
+    )
     p.add_argument("--workers", type=int, default=1, help="frames rendered in parallel processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -118,6 +128,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
             stride=args.stride,
             mvor_days=args.mvor_days,
             look=args.look or "twin",
+            look_parts=args.look_parts,
         )
     # Procedural scenes and sequences: the same procedural world, one frame at a time or over time.
     common = dict(
@@ -128,6 +139,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
         workers=args.workers,
         mvor_annotations=args.mvor_annotations if args.rig == "mvor" else None,
         look=args.look or "random",
+        look_parts=args.look_parts,
     )
     if args.sequence:
         return SynthConfig(

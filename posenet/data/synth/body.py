@@ -104,7 +104,9 @@ class BodyShape:
     apron_depth: float = 95.0
     apron_height: float = 0.75
     offsets: np.ndarray | None = None
-    model: str = "twin"  # "alt": the alt look's own body model (posenet.data.synth.body_alt)
+    model: str = "twin"  # "alt": the alt look's own body model (posenet.data.synth.body_alt); "grammar":
+    # primitives of drawn kinds (posenet.data.synth.body_grammar), drawn from the seed ``grammar``
+    grammar: int | None = None
 
 
 TWIN_SHAPE = BodyShape()
@@ -167,16 +169,24 @@ def anatomical_points(points: np.ndarray, offsets: np.ndarray | None) -> np.ndar
     return points + offsets[:, :1] * fwd + (offsets[:, 1:2] * side[:, None]) * left + offsets[:, 2:] * up
 
 
+def flesh_skeleton(points: np.ndarray, offsets: np.ndarray | None):
+    """What every body model builds on: the trunk's ``(fwd, left, up)`` axes of the annotated ``points``, the
+    anatomical points by name (moved by ``offsets``, :func:`anatomical_points`), the shoulders' and hips'
+    midpoints and the spine between them."""
+    axes = body_frame(points)
+    points = anatomical_points(points, offsets)
+    P = {name: points[i] for name, i in F.items()}
+    mid_sh = (P["left_shoulder"] + P["right_shoulder"]) / 2
+    mid_hip = (P["left_hip"] + P["right_hip"]) / 2
+    return axes, P, mid_sh, mid_hip, mid_sh - mid_hip
+
+
 def body_primitives(
     points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape = TWIN_SHAPE
 ) -> list[Primitive]:
     """Primitives of one person from a full skeleton ``(NUM_FULL, 3)`` (z-up world frame, mm)."""
     b = shape
-    fwd, left, up = body_frame(points)
-    points = anatomical_points(points, b.offsets)
-    P = {name: points[i] for name, i in F.items()}
-    mid_sh = (P["left_shoulder"] + P["right_shoulder"]) / 2
-    mid_hip = (P["left_hip"] + P["right_hip"]) / 2
+    (fwd, left, up), P, mid_sh, mid_hip, _ = flesh_skeleton(points, b.offsets)
     trunk = float(np.linalg.norm(mid_sh - mid_hip))
     s = float(np.clip(trunk / LENGTHS["trunk"], 0.8, 1.25))
     k = s * outfit.bulk  # clothing thickness

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from posenet.data.synth.body import BodyShape, Outfit, anatomical_points
+from posenet.data.synth.body import BodyShape, Outfit, flesh_skeleton
 from posenet.data.synth.primitives import Primitive, box, capsule, ellipsoid, round_cone
-from posenet.data.synth.skeleton_full import LENGTHS, NUM_FULL, F, body_frame, unit
+from posenet.data.synth.skeleton_full import LENGTHS, NUM_FULL, F, unit
 
 
 def _offsets() -> np.ndarray:
@@ -34,12 +34,7 @@ ALT_SHAPE = BodyShape(offsets=ALT_OFFSETS, model="alt")
 
 def alt_body_primitives(points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape) -> list[Primitive]:
     """Primitives of one person from a full skeleton ``(NUM_FULL, 3)`` (z-up world frame, mm)."""
-    fwd, left, up = body_frame(points)
-    points = anatomical_points(points, shape.offsets)
-    P = {name: points[i] for name, i in F.items()}
-    mid_sh = (P["left_shoulder"] + P["right_shoulder"]) / 2
-    mid_hip = (P["left_hip"] + P["right_hip"]) / 2
-    spine = mid_sh - mid_hip
+    (fwd, left, up), P, mid_sh, mid_hip, spine = flesh_skeleton(points, shape.offsets)
     trunk = float(np.linalg.norm(spine))
     s = float(
         np.clip(trunk / (LENGTHS["trunk"] + 145.0), 0.8, 1.25)

@@ -34,6 +34,20 @@ from posenet.data.synth.sensor import ColourSensorConfig, DepthSensorConfig, Lig
 from posenet.data.synth.skeleton_full import NUM_FULL, F
 
 LOOKS = ("twin", "random", "alt")
+PARTS = ("body", "clothes", "colour", "depth", "occluders")
+"""The parts of a look that can be taken alone (``--look-parts``): body shape and joint placement; clothing,
+skin and hair; light, shading and colour camera; depth sensor (and its surface dropout); extra occluders."""
+
+
+def parse_parts(parts) -> frozenset[str]:
+    """The set of look parts from a list or a comma-separated string (None or empty: all of them)."""
+    if isinstance(parts, str):
+        parts = [p for p in parts.replace(",", " ").split() if p]
+    chosen = frozenset(parts or PARTS)
+    unknown = sorted(chosen - set(PARTS))
+    if unknown:
+        raise ValueError(f"unknown look part(s) {unknown}; expected some of {PARTS}")
+    return chosen
 
 
 @dataclass
@@ -48,12 +62,16 @@ class SceneLook:
 
 
 class Look:
-    """A look bound to one frame's own generator: :meth:`dress` each person, then :meth:`finish` the frame."""
+    """A look bound to one frame's own generator: :meth:`dress` each person, then :meth:`finish` the frame.
 
-    def __init__(self, name: str, rng: np.random.Generator) -> None:
+    ``parts`` (default: all of :data:`PARTS`) takes only those parts from this look and leaves the others as the
+    twin renders them: ``Look("alt", rng, {"depth"})`` is the twin with the alt look's depth sensor, which
+    tells how much of a look's cost is its sensor (``benchmarks/look_factors.py``)."""
+
+    def __init__(self, name: str, rng: np.random.Generator, parts=None) -> None:
         if name not in LOOKS:
             raise ValueError(f"unknown look {name!r}; expected one of {LOOKS}")
-        self.name, self.rng = name, rng
+        self.name, self.rng, self.parts = name, rng, parse_parts(parts)
         self.scene, self.lighting = (None, None)
         if name == "random":
             self.scene, self.lighting = random_scene(rng)
@@ -63,30 +81,42 @@ class Look:
     def dress(self, person) -> None:
         """Give a :class:`~posenet.data.synth.scene.Person` this look's outfit and body (in place)."""
         if self.name == "random":
-            person.outfit = random_outfit(self.rng, person.role)
-            person.shape = random_shape(self.rng)
+            outfit, shape = random_outfit(self.rng, person.role), random_shape(self.rng)
         elif self.name == "alt":
-            person.outfit = alt_outfit(self.rng, person.role)
-            person.shape = ALT_SHAPE
+            outfit, shape = alt_outfit(self.rng, person.role), ALT_SHAPE
+        else:
+            return
+        if "clothes" in self.parts:
+            person.outfit = outfit
+        if "body" in self.parts:
+            person.shape = shape
 
     def finish(self, frame, rig: Rig, protect: set[tuple[int, int]] | None = None) -> dict[str, int]:
         """Add this look's occluders (covering little of the ``protect`` (view, person) pairs) and set its
         lighting and sensors on ``frame``; returns how many occluders were added."""
         if self.name == "twin":
             return {}
-        if self.name == "random":
+        added = 0
+        if "occluders" in self.parts and self.name == "random":
             kinds = ("panel", "pole", "cart", "screen", "lamp", "stand")
             n = int(self.rng.choice([0, 1, 2, 3, 4], p=[0.2, 0.3, 0.25, 0.15, 0.1]))
             added = add_clutter(frame, rig, self.rng, kinds, n, (0.6, 1.5), protect, random_materials=True)
-        else:
+        elif "occluders" in self.parts:
             added = add_clutter(frame, rig, self.rng, ("column", "boom", "trolley"), 2, (1.0, 1.0), protect)
-        frame.look, frame.lighting = self.scene, self.lighting
+        if self.parts >= {"colour", "depth"}:
+            frame.look, frame.lighting = self.scene, self.lighting
+        elif "colour" in self.parts:  # the twin's depth sensor under this look's light and camera
+            frame.look = SceneLook(self.name, colour=self.scene.colour, room_gain=self.scene.room_gain)
+            frame.lighting = self.lighting
+        elif "depth" in self.parts:  # this look's depth sensor, the twin's light and camera
+            frame.look = SceneLook(self.name, depth=self.scene.depth, dropout_gain=self.scene.dropout_gain)
         return {"clutter": added}
 
 
-def make_look(name: str, rng: np.random.Generator) -> Look | None:
-    """The :class:`Look` for ``name``, or None for ``twin`` (which draws nothing)."""
-    return None if name == "twin" else Look(name, rng)
+def make_look(name: str, rng: np.random.Generator, parts=None) -> Look | None:
+    """The :class:`Look` for ``name`` (only its ``parts``, default all), or None for ``twin`` (which draws
+    nothing)."""
+    return None if name == "twin" else Look(name, rng, parts)
 
 
 # ------------------------------------------------------------------ random: bodies
@@ -117,10 +147,15 @@ def random_offsets(rng: np.random.Generator) -> np.ndarray:
     return o
 
 
+GRAMMAR_SHARE = 0.5  # of the random look's bodies built by posenet.data.synth.body_grammar
+
+
 def random_shape(rng: np.random.Generator) -> BodyShape:
     """A body within anthropometric ranges: overall girth 0.88-1.18 of the twin's, each part +-10-20 % about
     it, chest and belly depths, shoulder and hip widths of the flesh, a paunch for 30 %, skull 0.92-1.08, and
-    the joint placement of :func:`random_offsets`."""
+    the joint placement of :func:`random_offsets`. Half of them (``GRAMMAR_SHARE``) are built by the body
+    grammar (:mod:`posenet.data.synth.body_grammar`: other kinds of trunk, limbs and head) instead of the twin's
+    construction; the joint placement applies to both."""
     u = rng.uniform
     g = u(0.88, 1.18)
 
@@ -155,6 +190,7 @@ def random_shape(rng: np.random.Generator) -> BodyShape:
         apron_depth=u(70, 105),
         apron_height=u(0.6, 0.85),
         offsets=random_offsets(rng),
+        **({"model": "grammar", "grammar": int(rng.integers(2**31))} if rng.random() < GRAMMAR_SHARE else {}),
     )
 
 

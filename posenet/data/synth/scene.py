@@ -15,6 +15,7 @@ import numpy as np
 
 from posenet.data.synth.body import TWIN_SHAPE, BodyShape, Outfit, body_primitives
 from posenet.data.synth.body_alt import alt_body_primitives
+from posenet.data.synth.body_grammar import grammar_primitives
 from posenet.data.synth.primitives import SHELL, Primitive
 from posenet.data.synth.raster import GBuffer, Intrinsics, rasterize
 from posenet.data.synth.rig import Rig
@@ -102,11 +103,14 @@ class ViewRender:
     pixels: list[int]
 
 
+BUILDERS = {"alt": alt_body_primitives, "grammar": grammar_primitives}  # BodyShape.model -> its body model
+
+
 def frame_primitives(frame: Frame) -> list[Primitive]:
     """All primitives of a frame, the persons' owned by their index."""
     prims = list(frame.room)
     for i, person in enumerate(frame.persons):
-        build = alt_body_primitives if person.shape.model == "alt" else body_primitives
+        build = BUILDERS.get(person.shape.model, body_primitives)
         prims += build(person.points, person.outfit, i, person.shape)
         prims += [replace(p, owner=i) for p in person.extra]
     return prims
