@@ -181,13 +181,21 @@ def flesh_skeleton(points: np.ndarray, offsets: np.ndarray | None):
     return axes, P, mid_sh, mid_hip, mid_sh - mid_hip
 
 
+def tapered_limb(a, b, ra: float, rb: float, owner: int, material: Material) -> Primitive:
+    """A limb tapering from radius ``ra`` at ``a`` to ``rb`` at ``b``; a bone shorter than the taper (odd
+    annotations) stays a capsule of the mean radius."""
+    if np.linalg.norm(b - a) > abs(ra - rb) + 1:
+        return round_cone(a, b, ra, rb, owner, material)
+    return capsule(a, b, (ra + rb) / 2, owner, material)
+
+
 def body_primitives(
     points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape = TWIN_SHAPE
 ) -> list[Primitive]:
     """Primitives of one person from a full skeleton ``(NUM_FULL, 3)`` (z-up world frame, mm)."""
     b = shape
-    (fwd, left, up), P, mid_sh, mid_hip, _ = flesh_skeleton(points, b.offsets)
-    trunk = float(np.linalg.norm(mid_sh - mid_hip))
+    (fwd, left, up), P, mid_sh, mid_hip, spine = flesh_skeleton(points, b.offsets)
+    trunk = float(np.linalg.norm(spine))
     s = float(np.clip(trunk / LENGTHS["trunk"], 0.8, 1.25))
     k = s * outfit.bulk  # clothing thickness
     sh_w = float(np.linalg.norm(P["left_shoulder"] - P["right_shoulder"]))
@@ -197,11 +205,8 @@ def body_primitives(
     def cap_(a, b, r, mat):
         out.append(capsule(a, b, r, owner, mat))
 
-    def limb(a, b, ra, rb, mat):  # tapered; a bone shorter than the taper (odd annotations) stays a capsule
-        if np.linalg.norm(b - a) > abs(ra - rb) + 1:
-            out.append(round_cone(a, b, ra, rb, owner, mat))
-        else:
-            cap_(a, b, (ra + rb) / 2, mat)
+    def limb(a, b, ra, rb, mat):
+        out.append(tapered_limb(a, b, ra, rb, owner, mat))
 
     def ell(c, radii, axes, mat):
         out.append(ellipsoid(c, radii, np.stack(axes, axis=1), owner, mat))

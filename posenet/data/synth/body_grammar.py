@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from posenet.data.synth.body import BodyShape, Outfit, flesh_skeleton
+from posenet.data.synth.body import BodyShape, Outfit, flesh_skeleton, tapered_limb
 from posenet.data.synth.primitives import Primitive, box, capsule, ellipsoid, round_cone
 from posenet.data.synth.skeleton_full import LENGTHS, unit
 
@@ -110,8 +110,8 @@ def grammar_primitives(points: np.ndarray, outfit: Outfit, owner: int, shape: Bo
     # Limbs: one kind for the arms, one for the legs.
     def limb(kind, a, b, ra, rb, mat):
         length = float(np.linalg.norm(b - a))
-        if kind == "cone" and length > abs(ra - rb) + 1:
-            out.append(round_cone(a, b, ra, rb, owner, mat))
+        if kind == "cone":
+            out.append(tapered_limb(a, b, ra, rb, owner, mat))
         elif kind == "beads" and length > 1:
             d = unit(b - a)
             n = int(rng.integers(2, 4))

@@ -97,12 +97,17 @@ class Look:
         if self.name == "twin":
             return {}
         added = 0
-        if "occluders" in self.parts and self.name == "random":
-            kinds = ("panel", "pole", "cart", "screen", "lamp", "stand")
-            n = int(self.rng.choice([0, 1, 2, 3, 4], p=[0.2, 0.3, 0.25, 0.15, 0.1]))
-            added = add_clutter(frame, rig, self.rng, kinds, n, (0.6, 1.5), protect, random_materials=True)
-        elif "occluders" in self.parts:
-            added = add_clutter(frame, rig, self.rng, ("column", "boom", "trolley"), 2, (1.0, 1.0), protect)
+        if "occluders" in self.parts:
+            if self.name == "random":
+                kinds = ("panel", "pole", "cart", "screen", "lamp", "stand")
+                n = int(self.rng.choice([0, 1, 2, 3, 4], p=[0.2, 0.3, 0.25, 0.15, 0.1]))
+                added = add_clutter(
+                    frame, rig, self.rng, kinds, n, (0.6, 1.5), protect, random_materials=True
+                )
+            else:
+                added = add_clutter(
+                    frame, rig, self.rng, ("column", "boom", "trolley"), 2, (1.0, 1.0), protect
+                )
         if self.parts >= {"colour", "depth"}:
             frame.look, frame.lighting = self.scene, self.lighting
         elif "colour" in self.parts:  # the twin's depth sensor under this look's light and camera

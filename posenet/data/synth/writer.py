@@ -72,9 +72,8 @@ class SynthConfig:
     stride: int = 1  # twin: render every stride-th MVOR frame (quick fidelity checks)
     mvor_days: list[int] | None = None  # twin: render only these MVOR days (None: all four)
     look: str = "twin"  # "twin" (the look before looks existed), "random" (to train on) or "alt" (to test on)
-    look_parts: list[str] | None = (
-        None  # only these parts of the look (looks.PARTS), the rest twin; None: all
-    )
+    # only these parts of the look (looks.PARTS), the rest as the twin renders it; None: all of them
+    look_parts: list[str] | None = None
     frames: int = 60  # sequence: frames per sequence
     fps: float = 15.0  # sequence: frame rate (the frames' timestamp_s)
     persons: int = 3  # sequence: clinicians in the sequence (not all in the room all the time)
