@@ -323,6 +323,12 @@ def test_the_body_grammar_builds_varied_bodies_the_same_every_frame():
     grammar = [s for s in shapes if s.model == "grammar"]
     assert abs(len(grammar) / len(shapes) - GRAMMAR_SHARE) < 0.1
     assert len({s.grammar for s in grammar}) == len(grammar)  # a body of its own each
+    for share in (0.0, 0.8, 1.0):  # --grammar-share
+        rng = np.random.default_rng(1)
+        drawn = [random_shape(rng, share).model == "grammar" for _ in range(200)]
+        assert abs(np.mean(drawn) - share) < 0.1
+    with pytest.raises(ValueError, match="grammar_share"):
+        Look("random", np.random.default_rng(0), grammar_share=1.5)
     if ctx is None:
         pytest.skip("MVOR annotations not found")
     info = ctx.frames[300]

@@ -21,7 +21,7 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
-from posenet.data.synth.looks import LOOKS, PARTS
+from posenet.data.synth.looks import GRAMMAR_SHARE, LOOKS, PARTS
 from posenet.data.synth.writer import SynthConfig, generate
 
 DEFAULT_MVOR = Path(__file__).resolve().parents[3] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
@@ -108,6 +108,14 @@ def build_parser() -> argparse.ArgumentParser:
         "e.g. --look alt --look-parts depth is the twin seen by the alt look's depth sensor "
         "(benchmarks/look_factors.py; default: the whole look)",
     )
+    p.add_argument(
+        "--grammar-share",
+        type=float,
+        default=GRAMMAR_SHARE,
+        metavar="F",
+        help="random look: the share of people whose body the body grammar builds (other kinds of trunk, limbs "
+        f"and head; docs/synth.md); the rest get the twin's construction in drawn sizes (default {GRAMMAR_SHARE})",
+    )
     p.add_argument("--workers", type=int, default=1, help="frames rendered in parallel processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -129,6 +137,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
             mvor_days=args.mvor_days,
             look=args.look or "twin",
             look_parts=args.look_parts,
+            grammar_share=args.grammar_share,
         )
     # Procedural scenes and sequences: the same procedural world, one frame at a time or over time.
     common = dict(
@@ -140,6 +149,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
         mvor_annotations=args.mvor_annotations if args.rig == "mvor" else None,
         look=args.look or "random",
         look_parts=args.look_parts,
+        grammar_share=args.grammar_share,
     )
     if args.sequence:
         return SynthConfig(

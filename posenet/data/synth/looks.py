@@ -39,6 +39,9 @@ PARTS = ("body", "clothes", "colour", "depth", "occluders")
 skin and hair; light, shading and colour camera; depth sensor (and its surface dropout); extra occluders."""
 
 
+GRAMMAR_SHARE = 0.5  # default share of the random look's bodies built by posenet.data.synth.body_grammar
+
+
 def parse_parts(parts) -> frozenset[str]:
     """The set of look parts from a list or a comma-separated string (None or empty: all of them)."""
     if isinstance(parts, str):
@@ -68,10 +71,15 @@ class Look:
     twin renders them: ``Look("alt", rng, {"depth"})`` is the twin with the alt look's depth sensor, which
     tells how much of a look's cost is its sensor (``benchmarks/look_factors.py``)."""
 
-    def __init__(self, name: str, rng: np.random.Generator, parts=None) -> None:
+    def __init__(
+        self, name: str, rng: np.random.Generator, parts=None, grammar_share: float = GRAMMAR_SHARE
+    ) -> None:
         if name not in LOOKS:
             raise ValueError(f"unknown look {name!r}; expected one of {LOOKS}")
+        if not 0.0 <= grammar_share <= 1.0:
+            raise ValueError(f"grammar_share must lie in [0, 1], got {grammar_share}")
         self.name, self.rng, self.parts = name, rng, parse_parts(parts)
+        self.grammar_share = float(grammar_share)
         self.scene, self.lighting = (None, None)
         if name == "random":
             self.scene, self.lighting = random_scene(rng)
@@ -81,7 +89,7 @@ class Look:
     def dress(self, person) -> None:
         """Give a :class:`~posenet.data.synth.scene.Person` this look's outfit and body (in place)."""
         if self.name == "random":
-            outfit, shape = random_outfit(self.rng, person.role), random_shape(self.rng)
+            outfit, shape = random_outfit(self.rng, person.role), random_shape(self.rng, self.grammar_share)
         elif self.name == "alt":
             outfit, shape = alt_outfit(self.rng, person.role), ALT_SHAPE
         else:
@@ -118,10 +126,12 @@ class Look:
         return {"clutter": added}
 
 
-def make_look(name: str, rng: np.random.Generator, parts=None) -> Look | None:
+def make_look(
+    name: str, rng: np.random.Generator, parts=None, grammar_share: float = GRAMMAR_SHARE
+) -> Look | None:
     """The :class:`Look` for ``name`` (only its ``parts``, default all), or None for ``twin`` (which draws
     nothing)."""
-    return None if name == "twin" else Look(name, rng, parts)
+    return None if name == "twin" else Look(name, rng, parts, grammar_share)
 
 
 # ------------------------------------------------------------------ random: bodies
@@ -152,15 +162,12 @@ def random_offsets(rng: np.random.Generator) -> np.ndarray:
     return o
 
 
-GRAMMAR_SHARE = 0.5  # of the random look's bodies built by posenet.data.synth.body_grammar
-
-
-def random_shape(rng: np.random.Generator) -> BodyShape:
+def random_shape(rng: np.random.Generator, grammar_share: float = GRAMMAR_SHARE) -> BodyShape:
     """A body within anthropometric ranges: overall girth 0.88-1.18 of the twin's, each part +-10-20 % about
     it, chest and belly depths, shoulder and hip widths of the flesh, a paunch for 30 %, skull 0.92-1.08, and
-    the joint placement of :func:`random_offsets`. Half of them (``GRAMMAR_SHARE``) are built by the body
-    grammar (:mod:`posenet.data.synth.body_grammar`: other kinds of trunk, limbs and head) instead of the twin's
-    construction; the joint placement applies to both."""
+    the joint placement of :func:`random_offsets`. A share ``grammar_share`` of them (default half) is built
+    by the body grammar (:mod:`posenet.data.synth.body_grammar`: other kinds of trunk, limbs and head) instead
+    of the twin's construction; the joint placement applies to both."""
     u = rng.uniform
     g = u(0.88, 1.18)
 
@@ -195,7 +202,7 @@ def random_shape(rng: np.random.Generator) -> BodyShape:
         apron_depth=u(70, 105),
         apron_height=u(0.6, 0.85),
         offsets=random_offsets(rng),
-        **({"model": "grammar", "grammar": int(rng.integers(2**31))} if rng.random() < GRAMMAR_SHARE else {}),
+        **({"model": "grammar", "grammar": int(rng.integers(2**31))} if rng.random() < grammar_share else {}),
     )
 
 

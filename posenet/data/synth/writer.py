@@ -31,7 +31,7 @@ import numpy as np
 from tqdm import tqdm
 
 from posenet.data.images import COLOR_PNG_PARAMS, DEPTH_PNG_PARAMS
-from posenet.data.synth.looks import LOOKS, Look, make_look, parse_parts
+from posenet.data.synth.looks import GRAMMAR_SHARE, LOOKS, Look, make_look, parse_parts
 from posenet.data.synth.procedural import procedural_frame
 from posenet.data.synth.rig import Rig, random_rig
 from posenet.data.synth.scene import Frame, render_frame
@@ -74,6 +74,7 @@ class SynthConfig:
     look: str = "twin"  # "twin" (the look before looks existed), "random" (to train on) or "alt" (to test on)
     # only these parts of the look (looks.PARTS), the rest as the twin renders it; None: all of them
     look_parts: list[str] | None = None
+    grammar_share: float = GRAMMAR_SHARE  # random look: share of bodies built by the body grammar
     frames: int = 60  # sequence: frames per sequence
     fps: float = 15.0  # sequence: frame rate (the frames' timestamp_s)
     persons: int = 3  # sequence: clinicians in the sequence (not all in the room all the time)
@@ -212,7 +213,9 @@ def sequence_stage(cfg: SynthConfig, rigs: DatasetRigs, day: int) -> tuple[Stage
     """Day ``day``'s sequence, built once per process from its own generators (the same in every worker)."""
     stages = _STATE.setdefault("stages", {})
     if day not in stages:
-        look = make_look(cfg.look, frame_rng(cfg.seed, cfg.mode, day, 0, purpose=4), cfg.look_parts)
+        look = make_look(
+            cfg.look, frame_rng(cfg.seed, cfg.mode, day, 0, purpose=4), cfg.look_parts, cfg.grammar_share
+        )
         rng = frame_rng(cfg.seed, cfg.mode, day, 0, purpose=3)
         stages[day] = build_stage(rng, rigs.rigs[day], cfg.frames, cfg.fps, cfg.persons, look)
     return stages[day]
@@ -247,7 +250,12 @@ def render_job(job: Job) -> JobResult:
     twin: TwinContext | None = _STATE["twin"]
     t0 = time.perf_counter()
     rng = frame_rng(cfg.seed, cfg.mode, job.day, job.frame)
-    look = make_look(cfg.look, frame_rng(cfg.seed, cfg.mode, job.day, job.frame, purpose=2), cfg.look_parts)
+    look = make_look(
+        cfg.look,
+        frame_rng(cfg.seed, cfg.mode, job.day, job.frame, purpose=2),
+        cfg.look_parts,
+        cfg.grammar_share,
+    )
     frame, stats = _build_frame(cfg, rigs, twin, job, rng, look)
     rig = rigs.rigs[job.day]
     views = render_frame(frame, rig, rng)
@@ -350,6 +358,8 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
     if cfg.look not in LOOKS:
         raise ValueError(f"unknown look {cfg.look!r}; expected one of {LOOKS}")
     parse_parts(cfg.look_parts)  # a clear error before any frame is rendered
+    if not 0.0 <= cfg.grammar_share <= 1.0:
+        raise ValueError(f"grammar_share must lie in [0, 1] (a share of the people), got {cfg.grammar_share}")
     twin = None
     if cfg.mode == "twin" or cfg.rig == "mvor":
         if not cfg.mvor_annotations or not Path(cfg.mvor_annotations).is_file():
