@@ -168,7 +168,9 @@ def _lifted(estimate) -> tuple[np.ndarray, np.ndarray]:
 
 def _units(dist: np.ndarray, view: np.ndarray, same_view_mm: float) -> np.ndarray:
     """(N,) unit label of each box: boxes of one view linked by skeletons within ``same_view_mm``."""
-    link = (np.nan_to_num(dist, nan=np.inf) <= same_view_mm) & (view[:, None] == view[None, :])
+    link = (dist <= same_view_mm) & (view[:, None] == view[None, :])  # NaN compares False
+    if np.count_nonzero(link) == np.count_nonzero(np.diagonal(link)):  # no two boxes of a view agree: the
+        return np.arange(len(view))  # common case, each box its own unit (what the search below gives)
     labels = components(link)
     # Number the units by their first box, so that the boxes' order (view order) is kept.
     _, first = np.unique(labels, return_index=True)
@@ -204,14 +206,20 @@ def group_skeletons(
         return []
     dist = skeleton_distances(joints, ok)  # (N, N)
     gap = np.linalg.norm(centres[:, None] - centres[None, :], axis=-1)  # (N, N), NaN without a centre
-    allowed = np.nan_to_num(dist, nan=np.inf) <= config.threshold_mm
+    allowed = dist <= config.threshold_mm  # NaN compares False
     allowed &= ~(gap > config.centre_gate_mm)  # NaN passes
     unit = _units(dist, view, config.same_view_mm)  # (N,)
     U = int(unit.max()) + 1
-    # Distance between units: their closest allowed pair of boxes (min over the members, via a scatter).
+    # Distance between units: their closest allowed pair of boxes (the min over each unit's rows, then columns).
     pair = np.where(allowed, dist, np.inf)
-    unit_dist = np.full((U, U), np.inf)
-    np.minimum.at(unit_dist, (unit[:, None].repeat(n, 1), unit[None, :].repeat(n, 0)), pair)
+    if U == n:  # each box its own unit: the units are the boxes renumbered
+        unit_dist = np.empty((U, U))
+        unit_dist[unit[:, None], unit[None, :]] = pair
+    else:
+        order = np.argsort(unit, kind="stable")
+        first = np.searchsorted(unit[order], np.arange(U))
+        rows = np.minimum.reduceat(pair[order], first, axis=0)  # (U, N)
+        unit_dist = np.minimum.reduceat(rows[:, order], first, axis=1)  # (U, U)
     unit_view = np.zeros(U, np.int64)
     unit_view[unit] = view
     if max_combinations is not None:
@@ -227,7 +235,11 @@ def group_skeletons(
         chosen = choose_greedily(combos, U, config.member_bonus_mm)
     else:
         chosen = choose_optimally(combos, U, config.link_reward_mm)
-    members = [np.flatnonzero(np.isin(unit, units)) for units, _ in chosen]
+    group_of = np.empty(U, np.int64)
+    for g, (units, _) in enumerate(chosen):  # every unit is in exactly one chosen group
+        group_of[units] = g
+    box_group = group_of[unit]  # (N,)
+    members = [np.flatnonzero(box_group == g) for g in range(len(chosen))]
     return [(m, mean) for m, (_, mean) in zip(members, chosen, strict=True)]
 
 
@@ -423,7 +435,8 @@ def drop_outliers(
         return groups
     rest, rest_ok = _lifted(heat.estimate(np.stack(rows)))  # (R, J, 3): each box's person without it
     b = np.array([n for _, n in owner])
-    dist = np.nan_to_num(joint_median_distance(rest, rest_ok, joints[b], ok[b]), nan=-np.inf)  # (R,)
+    dist = joint_median_distance(rest, rest_ok, joints[b], ok[b])  # (R,)
+    dist[np.isnan(dist)] = -np.inf
     starts = box_starts(boxes)
     drop = {}
     for r, (p, n) in enumerate(owner):
@@ -470,7 +483,7 @@ def admit_candidates(
         cost = joint_median_distance(
             person[ps][:, None], person_ok[ps][:, None], joints[n][None], ok[n][None]
         )
-        cost = np.where(np.nan_to_num(cost, nan=np.inf) <= within_mm, cost, 1e9)
+        cost = np.where(cost <= within_mm, cost, 1e9)  # NaN compares False
         for r, c in zip(*linear_sum_assignment(cost), strict=True):
             if cost[r, c] < 1e9:
                 indices[ps[r]][v] = int(ks[c])
@@ -505,7 +518,7 @@ def seen_from(
                 _depth_samples(np.stack([u - 2.5, w - 2.5, u + 2.5, w + 2.5], 1), view.depth, 1.0, 5)
             )
         measured = _valid_median(np.concatenate(samples))  # one median over every view's points
-        seen[inside] = np.nan_to_num(measured, nan=-np.inf) >= z[inside] - free_mm
+        seen[inside] = measured >= z[inside] - free_mm  # NaN (no depth) compares False
     return seen, inside, uv
 
 

@@ -253,6 +253,11 @@ def test_optimal_partition_is_a_partition_and_never_worse_than_greedy(monkeypatc
             by_milp = choose_optimally(combos, len(view), reward)
             monkeypatch.undo()
             assert abs(_partition_cost(by_milp, reward) - _partition_cost(best, reward)) < 1e-6
+            # a search stopped by its state budget hands the component to the integer program
+            monkeypatch.setattr(detector.matching, "_SEARCH_STATES", 1)
+            capped = choose_optimally(combos, len(view), reward)
+            monkeypatch.undo()
+            assert abs(_partition_cost(capped, reward) - _partition_cost(best, reward)) < 1e-6
         # a huge reward: as few persons as any partition, so never more than greedy's
         assert len(choose_optimally(combos, len(view), 1e5)) <= len(choose_greedily(combos, len(view)))
 
