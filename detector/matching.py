@@ -286,9 +286,7 @@ def choose_optimally(
             items = np.flatnonzero(label == comp)
             args = ([members[c] for c in in_comp], cost[in_comp], items, in_comp)
             try:
-                if len(items) > _SEARCH_ITEMS:
-                    raise _SearchTooLarge
-                picked += _search(*args)
+                picked += _search(*args) if len(items) <= _SEARCH_ITEMS else _milp(*args)
             except _SearchTooLarge:
                 picked += _milp(*args)
     picked_arr = np.asarray(picked, np.int64)

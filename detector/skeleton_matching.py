@@ -212,14 +212,10 @@ def group_skeletons(
     U = int(unit.max()) + 1
     # Distance between units: their closest allowed pair of boxes (the min over each unit's rows, then columns).
     pair = np.where(allowed, dist, np.inf)
-    if U == n:  # each box its own unit: the units are the boxes renumbered
-        unit_dist = np.empty((U, U))
-        unit_dist[unit[:, None], unit[None, :]] = pair
-    else:
-        order = np.argsort(unit, kind="stable")
-        first = np.searchsorted(unit[order], np.arange(U))
-        rows = np.minimum.reduceat(pair[order], first, axis=0)  # (U, N)
-        unit_dist = np.minimum.reduceat(rows[:, order], first, axis=1)  # (U, U)
+    order = np.argsort(unit, kind="stable")
+    first = np.searchsorted(unit[order], np.arange(U))  # every unit holds a box: strictly increasing
+    rows = np.minimum.reduceat(pair[order], first, axis=0)  # (U, N)
+    unit_dist = np.minimum.reduceat(rows[:, order], first, axis=1)  # (U, U)
     unit_view = np.zeros(U, np.int64)
     unit_view[unit] = view
     if max_combinations is not None:

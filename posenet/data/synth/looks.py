@@ -42,6 +42,13 @@ skin and hair; light, shading and colour camera; depth sensor (and its surface d
 GRAMMAR_SHARE = 0.5  # default share of the random look's bodies built by posenet.data.synth.body_grammar
 
 
+def check_grammar_share(share: float) -> float:
+    """``share`` as a float, or a clear error when it is no share of the people (outside [0, 1])."""
+    if not 0.0 <= share <= 1.0:
+        raise ValueError(f"grammar_share must lie in [0, 1] (a share of the people), got {share}")
+    return float(share)
+
+
 def parse_parts(parts) -> frozenset[str]:
     """The set of look parts from a list or a comma-separated string (None or empty: all of them)."""
     if isinstance(parts, str):
@@ -76,10 +83,8 @@ class Look:
     ) -> None:
         if name not in LOOKS:
             raise ValueError(f"unknown look {name!r}; expected one of {LOOKS}")
-        if not 0.0 <= grammar_share <= 1.0:
-            raise ValueError(f"grammar_share must lie in [0, 1], got {grammar_share}")
         self.name, self.rng, self.parts = name, rng, parse_parts(parts)
-        self.grammar_share = float(grammar_share)
+        self.grammar_share = check_grammar_share(grammar_share)
         self.scene, self.lighting = (None, None)
         if name == "random":
             self.scene, self.lighting = random_scene(rng)

@@ -31,7 +31,7 @@ import numpy as np
 from tqdm import tqdm
 
 from posenet.data.images import COLOR_PNG_PARAMS, DEPTH_PNG_PARAMS
-from posenet.data.synth.looks import GRAMMAR_SHARE, LOOKS, Look, make_look, parse_parts
+from posenet.data.synth.looks import GRAMMAR_SHARE, LOOKS, Look, check_grammar_share, make_look, parse_parts
 from posenet.data.synth.procedural import procedural_frame
 from posenet.data.synth.rig import Rig, random_rig
 from posenet.data.synth.scene import Frame, render_frame
@@ -357,9 +357,8 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
         raise ValueError(f"unknown mode {cfg.mode!r}; expected one of {tuple(MODE_CODES)}")
     if cfg.look not in LOOKS:
         raise ValueError(f"unknown look {cfg.look!r}; expected one of {LOOKS}")
-    parse_parts(cfg.look_parts)  # a clear error before any frame is rendered
-    if not 0.0 <= cfg.grammar_share <= 1.0:
-        raise ValueError(f"grammar_share must lie in [0, 1] (a share of the people), got {cfg.grammar_share}")
+    parse_parts(cfg.look_parts)  # clear errors before any frame is rendered
+    check_grammar_share(cfg.grammar_share)
     twin = None
     if cfg.mode == "twin" or cfg.rig == "mvor":
         if not cfg.mvor_annotations or not Path(cfg.mvor_annotations).is_file():
