@@ -2,6 +2,7 @@
 
     python benchmarks/detector_mode.py --data data/mvor_twin --days 4
     python benchmarks/detector_mode.py --data data/mvor_alt --days 4 --json runs/detector_mode_alt.json
+    python benchmarks/detector_mode.py --data data/mvor_twin --days 4 --pose-checkpoint OLD.safetensors  # other weights
 
 Runs the service's pipeline (``service.pipeline.ScenePipeline``, the shipped weights, the service's default
 backend) offline on every frame of ``--days``: once with the reference boxes and their ids (the paper's
@@ -135,15 +136,19 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--annotations", type=Path, help="its annotations (default: DATA/annotations.json)")
     p.add_argument("--days", type=int, nargs="+", help="recording days (default: all)")
     p.add_argument("--threads", type=int, default=2, help="runtime threads")
+    p.add_argument("--pose-checkpoint", type=Path,
+                   help="pose weights (NAME.safetensors with NAME.json, or a run folder; default: the shipped ones)")  # fmt: skip
     p.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
     p.add_argument("--json", type=Path, help="also write the results here")
+    p.add_argument("--predictions", type=Path,
+                   help="also write each variant's poses here (DIR/NAME.json, posenet.evaluate's input)")  # fmt: skip
     p.add_argument(
         "--picture", type=Path, help="draw the frame where the default took most unsure boxes (PNG)"
     )
     args = p.parse_args(argv)
     gt = load_annotations(args.annotations or args.data / "annotations.json")
     days = args.days or sorted({image_day(mv["images"][0]) for mv in gt["multiview_images"]})
-    pipe = ScenePipeline.from_checkpoints(backend="auto", threads=args.threads)
+    pipe = ScenePipeline.from_checkpoints(args.pose_checkpoint, backend="auto", threads=args.threads)
     # The views as the service decodes them (at the networks' read size, tests/test_parity.py): the detector then
     # sees the pixels it sees when served, and the figures are the served ones.
     ds = read_dataset(args.data, gt, pipe.read_size, days)
@@ -178,6 +183,10 @@ def main(argv: list[str] | None = None) -> dict:
                 taken = _used_unsure(variant, views, result)
                 if taken > best[0]:
                     best = (taken, i)
+    if args.predictions:
+        args.predictions.mkdir(parents=True, exist_ok=True)
+        for name, pr in preds.items():
+            (args.predictions / f"{name.strip('+').replace('+', '_')}.json").write_text(json.dumps(pr))
     rows = {}
     for name, pr in preds.items():
         r = evaluate(gt, pr, days=days)
@@ -217,7 +226,8 @@ def main(argv: list[str] | None = None) -> dict:
         variant.detector = FrameDetections(pipe.detector, views_of(sample), lowest)
         draw_frame(variant, sample, args.picture)
         print(f"picture of frame {sample.id} ({best[0]} unsure boxes taken): {args.picture}")
-    out = {"data": str(args.data), "days": days, "machine": machine_line(), "rows": rows}
+    out = {"data": str(args.data), "days": days, "machine": machine_line(), "rows": rows,
+           "pose_checkpoint": str(args.pose_checkpoint or "shipped")}  # fmt: skip
     if args.json:
         args.json.write_text(json.dumps(out, indent=2))
     return out
