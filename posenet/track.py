@@ -92,10 +92,10 @@ class TrackerConfig:
     # filters above): the 5th / 50th / 95th percentile of the height spanned is 411 / 568 / 710 mm for skeletons
     # within 50 cm of a clinician, 101 / 136 / 366 mm for those more than 1 m from anyone; below 200 / 250 / 300 /
     # 350 mm lie 3 / 6 / 6 / 49 of the 1,888 clinicians' and 115 / 119 / 119 / 121 of the 128 nobody's. Raised
-    # from 250 to 300 with the pose weights of 2026-12-04 (session 18), which unfold the patient further: on the same
-    # sequences their clinicians span 434 / 569 / 697 mm (5th / 50th / 95th percentile), and below 250 / 300 / 350
-    # mm lie 17 / 18 / 25 of their 1,831 clinicians' and 125 / 131 / 132 of their 246 nobody's skeletons; the
-    # tracks' IDF1 (weighted) is 0.721 from 250 to 350 mm (docs/tracking.md, "The patient again").
+    # from 250 to 300 with the pose weights of 2026-12-04 (session 18), which unfold the patient further: on five
+    # of them (seeds 1, 3-6) their clinicians span 434 / 569 / 697 mm (5th / 50th / 95th percentile), and below
+    # 250 / 300 / 350 mm lie 17 / 18 / 25 of their 1,831 clinicians' and 125 / 131 / 132 of their 246 nobody's
+    # skeletons; the tracks' IDF1 (weighted) is 0.721 from 250 to 350 mm (docs/tracking.md, "The patient again").
     min_height_mm: float = 300.0
     # Hysteresis: births need consecutive hits; a confirmed track survives short occlusions.
     birth_hits: int = 3
