@@ -15,7 +15,7 @@ from posenet.loss import mpjpe
 from posenet.model import ModelConfig, PoseNet
 from posenet.predict import main as predict_main
 from posenet.scene import Scene
-from posenet.train import lr_factor
+from posenet.train import lr_factor, single_view_loss
 from posenet.train import main as train_main
 from posenet.visualize import main as visualize_main
 
@@ -54,6 +54,37 @@ def test_one_training_step_lowers_the_loss(tiny, mode, aggregation):
     assert after.item() < before.item()
 
 
+def test_single_view_loss_is_the_fused_loss_where_one_view_boxes_the_person(tiny):
+    """--view-loss: each view's own estimate; with one boxed view it is the fused estimate, and it trains."""
+    torch.manual_seed(0)
+    root, ann = tiny
+    sample = MvorDataset(root, ann, days=[1])[0]
+    inputs = InputConfig(mode="crop", crop_size=32, image_size=(80, 60), train_crop=(64, 48))
+    cfg = ModelConfig(inputs=inputs, base=8, depth=2, precision="fp32")
+    model = PoseNet(cfg)
+    persons = Scene.from_sample(sample)
+    g = torch.Generator().manual_seed(0)
+    only_first = persons.has_box.clone()
+    only_first[:, 1:] = False
+    keep = only_first[:, 0]
+    assert keep.any() and persons.has_box[:, 1:].any()
+    one = build_scene(persons.views, persons.boxes, only_first, inputs, AugmentConfig(), g)
+    out = model(one)
+    sub = Scene.__new__(Scene)  # the annotations of the persons that view 0 boxes
+    sub.poses, sub.valid = persons.poses, persons.valid & keep[:, None]
+    fused = mpjpe(out.joints[keep], persons.poses[keep], persons.valid[keep])
+    torch.testing.assert_close(single_view_loss(cfg, out, sub, one), fused, rtol=1e-5, atol=1e-3)
+    # all views: a gradient everywhere it should be, and one step lowers it
+    scene = build_scene(persons.views, persons.boxes, persons.has_box, inputs, AugmentConfig(), g)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    before = single_view_loss(cfg, model(scene), persons, scene)
+    opt.zero_grad()
+    before.backward()
+    assert all(torch.isfinite(p.grad).all() for p in model.parameters() if p.grad is not None)
+    opt.step()
+    assert single_view_loss(cfg, model(scene), persons, scene).item() < before.item()
+
+
 def test_lr_schedule():
     assert lr_factor(0, 100, 0.75) == 1.0 and lr_factor(74, 100, 0.75) == 1.0
     assert 0.4 < lr_factor(87, 100, 0.75) < 0.6 and lr_factor(100, 100, 0.75) == 0.0
@@ -79,12 +110,15 @@ def test_cli_train_resume_predict(tiny, tmp_path):
     run = tmp_path / "run"
     base = ["--data", str(root), "--holdout-day", "2", "--out", str(run)]
     watch = ["--watch", f"{root}:2"]  # the held-out day itself, watched: the same figure under its own key
-    assert train_main([*base, *TINY[:-2], "--epochs", "1", "--val-every", "1", *watch]) == 0
+    assert (
+        train_main([*base, *TINY[:-2], "--epochs", "1", "--val-every", "1", "--view-loss", "0.5", *watch])
+        == 0
+    )
     for ckpt in ("last", "best"):
         assert (run / ckpt / "model.safetensors").is_file()
         saved = json.loads((run / ckpt / "config.json").read_text())
         assert saved["train"]["preset"] == "cpu" and saved["model"]["inputs"]["crop_size"] == 32
-        assert saved["train"]["data_description"]["train_days"] == [1]
+        assert saved["train"]["data_description"]["train_days"] == [1] and saved["train"]["view_loss"] == 0.5
         assert saved["trained_on"]["days"] == [1] and saved["trained_on"]["data"] == str(root)
     assert train_main([*base, "--resume", "--epochs", "2"]) == 0
     log = [json.loads(line) for line in (run / "log.jsonl").read_text().splitlines()]
