@@ -23,6 +23,9 @@ person (``nobody``: false persons, or persons MVOR did not annotate, such as the
 milliseconds of the matcher
 (``match``: lifting each box alone, grouping, fusing) and of the U-Net (``pose``).
 
+``--single-view`` also scores each reference box's single-view skeleton (the box lifted alone: what the
+skeleton matcher compares across views) against its person's annotated pose.
+
 ``--picture PNG`` also draws the frame where the default took the most unsure boxes: every detected box of
 each view, coloured by the person it ended in (solid: sure, dashed: unsure and taken), unsure boxes that
 completed nobody dotted grey, and sure boxes in no person (dropped as outliers, or by the free-space rule) in red.
@@ -78,6 +81,27 @@ def _used_unsure(pipe: ScenePipeline, views, result) -> int:
     return sum(
         bool(candidate[v][k]) for p in result.persons for v, ks in enumerate(p.box_indices) for k in ks
     )
+
+
+def single_view_errors(pipe: ScenePipeline, sample, views) -> np.ndarray:
+    """``(B, 2)`` mm for each annotated reference box of ``sample``: the mean and the median over the annotated
+    joints of the distance between that box's single-view skeleton (the box lifted alone, what the skeleton
+    matcher compares across views, ``BoxHeatmaps.single_view``) and the person's annotated pose."""
+    boxes = [np.asarray(v.boxes, np.float32).reshape(-1, 4) for v in sample.views]
+    alone = pipe.pose.box_heatmaps(views, boxes).single_view()
+    joints = (
+        alone.joints.detach().cpu().numpy() if hasattr(alone.joints, "detach") else np.asarray(alone.joints)
+    )
+    row = {int(pid): n for n, pid in enumerate(sample.person_ids)}
+    ids = np.concatenate([np.asarray(v.box_person_ids, int).reshape(-1) for v in sample.views])
+    out = []
+    for k, pid in enumerate(ids):
+        n = row.get(int(pid))
+        if n is None or not sample.valid[n].any():
+            continue
+        d = np.linalg.norm(joints[k] - sample.poses[n], axis=-1)[sample.valid[n]]
+        out.append((d.mean(), np.median(d)))
+    return np.asarray(out, float).reshape(-1, 2)
 
 
 def draw_frame(pipe: ScenePipeline, sample, out: Path) -> None:
@@ -145,6 +169,9 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument(
         "--picture", type=Path, help="draw the frame where the default took most unsure boxes (PNG)"
     )
+    p.add_argument("--single-view", action="store_true",
+                   help="also score each reference box's single-view skeleton (the box lifted alone, what the "
+                   "skeleton matcher compares): mean error, and the median / 90th percentile of its median joint")  # fmt: skip
     args = p.parse_args(argv)
     gt = load_annotations(args.annotations or args.data / "annotations.json")
     days = args.days or sorted({image_day(mv["images"][0]) for mv in gt["multiview_images"]})
@@ -165,10 +192,13 @@ def main(argv: list[str] | None = None) -> dict:
     best = (-1, None)  # (unsure boxes taken, frame index) for --picture
     times = {n: {"match": [], "pose": []} for n in pipes}
     nobody = dict.fromkeys(pipes, 0)
+    alone = []  # --single-view: (B, 2) mm per frame
     for i in tqdm(range(len(ds)), desc="frames", unit="frame"):
         sample = ds[i]
         views = views_of(sample)
         preds["reference"] += pipe.run_sample(sample, reference_boxes=True)[1]
+        if args.single_view:
+            alone.append(single_view_errors(pipe, sample, views))
         frame = FrameDetections(pipe.detector, views, lowest)
         for name, variant in pipes.items():
             variant.detector = frame
@@ -220,6 +250,15 @@ def main(argv: list[str] | None = None) -> dict:
             f"| {name} | {cells} | {row['overall']:.2f} | {ratio if name != 'reference' else ''} | "
             f"{row.get('nobody', '')} | {timing or ' | '} |"
         )
+    if alone:
+        err = np.concatenate(alone) / 10
+        rows["reference"]["single_view_cm"] = {
+            "boxes": len(err), "mean": float(err[:, 0].mean()), "median_joint_median": float(np.median(err[:, 1])),
+            "median_joint_p90": float(np.percentile(err[:, 1], 90)),
+        }  # fmt: skip
+        sv = rows["reference"]["single_view_cm"]
+        print(f"single-view skeletons of {sv['boxes']} reference boxes: mean {sv['mean']:.2f} cm; median joint: "
+              f"median {sv['median_joint_median']:.2f}, 90th percentile {sv['median_joint_p90']:.2f} cm")  # fmt: skip
     if args.picture and best[1] is not None:
         variant = pipes[args.variants[-1]]
         sample = ds[best[1]]
