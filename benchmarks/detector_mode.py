@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig
+from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig, _lifted
 from posenet.boxes import ground_truth_ids
 from posenet.data.mvor import image_day, load_annotations
 from posenet.evaluate import evaluate, prediction_record
@@ -85,21 +85,18 @@ def _used_unsure(pipe: ScenePipeline, views, result) -> int:
 
 def single_view_errors(pipe: ScenePipeline, sample, views) -> np.ndarray:
     """``(B, 2)`` mm for each annotated reference box of ``sample``: the mean and the median over the annotated
-    joints of the distance between that box's single-view skeleton (the box lifted alone, what the skeleton
+    joints the box lifts (finite, with depth points) of the distance between that box's single-view skeleton (the box lifted alone, what the skeleton
     matcher compares across views, ``BoxHeatmaps.single_view``) and the person's annotated pose."""
     boxes = [np.asarray(v.boxes, np.float32).reshape(-1, 4) for v in sample.views]
-    alone = pipe.pose.box_heatmaps(views, boxes).single_view()
-    joints = (
-        alone.joints.detach().cpu().numpy() if hasattr(alone.joints, "detach") else np.asarray(alone.joints)
-    )
+    joints, usable = _lifted(pipe.pose.box_heatmaps(views, boxes).single_view())  # as the matcher reads them
     row = {int(pid): n for n, pid in enumerate(sample.person_ids)}
     ids = np.concatenate([np.asarray(v.box_person_ids, int).reshape(-1) for v in sample.views])
     out = []
     for k, pid in enumerate(ids):
         n = row.get(int(pid))
-        if n is None or not sample.valid[n].any():
+        if n is None or not (ok := sample.valid[n] & usable[k]).any():
             continue
-        d = np.linalg.norm(joints[k] - sample.poses[n], axis=-1)[sample.valid[n]]
+        d = np.linalg.norm(joints[k] - sample.poses[n], axis=-1)[ok]
         out.append((d.mean(), np.median(d)))
     return np.asarray(out, float).reshape(-1, 2)
 

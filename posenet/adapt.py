@@ -45,14 +45,13 @@ import torch
 from safetensors.torch import load_file
 from tqdm import tqdm
 
-from posenet import lifting
 from posenet.adapt_losses import (
     bone_loss,
     bone_statistics,
     ema_update,
     mean_or_zero,
-    per_view_estimates,
     pseudo_labels,
+    scene_view_estimates,
     view_consistency,
 )
 from posenet.augment import AugmentConfig
@@ -272,9 +271,7 @@ def adapt_step(
     if weights["consistency"] > 0:
         dists = []
         for o, s in zip(t_outs, t_scenes, strict=True):
-            dev = o.logits.device
-            points = lifting.lift(s.cameras, s.uv.to(dev), s.depth.to(dev))  # (P or 1, V, M, 3)
-            views = per_view_estimates(o.logits, points, s.valid.to(dev), eps)
+            views = scene_view_estimates(o, s, eps)
             dists.append(view_consistency(views.joints, views.has_points, o.joints, cfg.min_views))
         parts["consistency"] = mean_or_zero(dists, like)
     share = 0.0

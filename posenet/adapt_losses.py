@@ -62,6 +62,14 @@ def per_view_estimates(
     )
 
 
+def scene_view_estimates(out: PoseOutput, scene, eps: float = lifting.EPS_LOGIT) -> lifting.JointEstimate:
+    """:func:`per_view_estimates` of the network's output ``out`` on ``scene`` (``posenet.inputs.SceneInput``):
+    its pixels lifted through its cameras, on the device of the logits."""
+    dev = out.logits.device
+    points = lifting.lift(scene.cameras, scene.uv.to(dev), scene.depth.to(dev))  # (P or 1, V, M, 3)
+    return per_view_estimates(out.logits, points, scene.valid.to(dev), eps)
+
+
 def view_consistency(
     per_view: Tensor, view_ok: Tensor, fused: Tensor, min_views: int = 2, stop_gradient: bool = True
 ) -> Tensor:

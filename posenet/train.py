@@ -35,8 +35,7 @@ import torch
 import torch.distributed as dist
 from tqdm import tqdm
 
-from posenet import lifting
-from posenet.adapt_losses import per_view_estimates
+from posenet.adapt_losses import scene_view_estimates
 from posenet.augment import AugmentConfig, detector_like_boxes
 from posenet.boxes import person_ids
 from posenet.checkpoint import save_checkpoint, sectioned, training_config
@@ -212,9 +211,8 @@ def scene_loss(model_config: ModelConfig, out, persons, cameras) -> torch.Tensor
 def single_view_loss(model_config: ModelConfig, out, persons, scene) -> torch.Tensor:
     """MPJPE (mm) of every (person, view) estimate from that view's points alone, over the views that box the
     person: ``out`` of the network on ``scene`` (``posenet.inputs.SceneInput``), ``persons`` its annotations."""
-    dev = out.logits.device
-    points = lifting.lift(scene.cameras, scene.uv.to(dev), scene.depth.to(dev))  # (P or 1, V, M, 3)
-    views = per_view_estimates(out.logits, points, scene.valid.to(dev), model_config.eps)
+    views = scene_view_estimates(out, scene, model_config.eps)
+    dev = views.joints.device
     P, V, J, _ = views.joints.shape
     target = persons.poses.to(dev)[:, None].expand(P, V, J, 3)
     valid = persons.valid.to(dev)[:, None] & views.has_points[..., None]  # (P, V, J)
