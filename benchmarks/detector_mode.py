@@ -159,6 +159,8 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--threads", type=int, default=2, help="runtime threads")
     p.add_argument("--pose-checkpoint", type=Path,
                    help="pose weights (NAME.safetensors with NAME.json, or a run folder; default: the shipped ones)")  # fmt: skip
+    p.add_argument("--flip-test", action=argparse.BooleanOptionalAction, default=None,
+                   help="average the pose network with the mirrored inputs (default: the checkpoint's setting)")  # fmt: skip
     p.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
     p.add_argument("--json", type=Path, help="also write the results here")
     p.add_argument("--predictions", type=Path,
@@ -172,7 +174,9 @@ def main(argv: list[str] | None = None) -> dict:
     args = p.parse_args(argv)
     gt = load_annotations(args.annotations or args.data / "annotations.json")
     days = args.days or sorted({image_day(mv["images"][0]) for mv in gt["multiview_images"]})
-    pipe = ScenePipeline.from_checkpoints(args.pose_checkpoint, backend="auto", threads=args.threads)
+    pipe = ScenePipeline.from_checkpoints(
+        args.pose_checkpoint, backend="auto", threads=args.threads, flip_test=args.flip_test
+    )
     # The views as the service decodes them (at the networks' read size, tests/test_parity.py): the detector then
     # sees the pixels it sees when served, and the figures are the served ones.
     ds = read_dataset(args.data, gt, pipe.read_size, days)
@@ -263,7 +267,7 @@ def main(argv: list[str] | None = None) -> dict:
         draw_frame(variant, sample, args.picture)
         print(f"picture of frame {sample.id} ({best[0]} unsure boxes taken): {args.picture}")
     out = {"data": str(args.data), "days": days, "machine": machine_line(), "rows": rows,
-           "pose_checkpoint": str(args.pose_checkpoint or "shipped")}  # fmt: skip
+           "pose_checkpoint": str(args.pose_checkpoint or "shipped"), "flip_test": pipe.pose.model.config.flip_test}  # fmt: skip
     if args.json:
         args.json.write_text(json.dumps(out, indent=2))
     return out

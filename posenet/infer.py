@@ -73,13 +73,18 @@ class PoseEstimator:
         precision: str = "auto",
         backend: str = "torch",
         threads: int | None = None,
+        flip_test: bool | None = None,
     ) -> PoseEstimator:
         """Load a checkpoint folder or ``.safetensors`` file; None -> ``posenet/weights/default.safetensors``
         (raises FileNotFoundError saying how to train or point to one when it is missing).
 
         ``precision`` and ``backend`` say how this machine runs it (``posenet.execution``, ``posenet.runtime``).
+        ``flip_test``: average every estimate with the mirrored inputs' (2x the U-Net work); None: the
+        checkpoint's ``flip_test``.
         """
         model, config = load_checkpoint(path, device, precision)
+        if flip_test is not None:
+            model.config.flip_test = bool(flip_test)
         est = cls(model, config, device)
         est.use_backend(backend, threads)
         return est

@@ -123,9 +123,9 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
-    estimator = PoseEstimator.from_checkpoint(args.checkpoint, args.device, args.precision)
-    if args.flip_test is not None:
-        estimator.model.config.flip_test = args.flip_test
+    estimator = PoseEstimator.from_checkpoint(
+        args.checkpoint, args.device, args.precision, flip_test=args.flip_test
+    )
     data = read_dataset(args.data, args.annotations, estimator.model.config.inputs, args.days)
     preds = predict_samples(estimator, data, args.scenes_per_batch)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

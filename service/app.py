@@ -53,6 +53,7 @@ async def lifespan(app: FastAPI):
                 settings.precision,
                 settings.backend,
                 settings.threads,
+                settings.flip_test,
             )
         )
     yield
@@ -99,6 +100,8 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
         max_spread_mm=settings.track_max_spread_mm,
         min_torso_mm=settings.track_min_torso_mm,
         min_height_mm=settings.track_min_height_mm,
+        lying_height_mm=settings.track_lying_height_mm or None,
+        lying_spread_mm=settings.track_lying_spread_mm,
         unsure_gate_mm=settings.track_unsure_gate_mm or None,
     )
     app.state.streams = StreamRegistry(

@@ -176,18 +176,20 @@ class ScenePipeline:
         precision: str = "auto",
         backend: str = "torch",
         threads: int | None = None,
+        flip_test: bool | None = None,
     ) -> ScenePipeline:
         """Load both models; ``None`` paths mean the weights shipped with the package.
 
         ``precision`` and ``backend`` say how this machine runs both networks (``posenet.execution``,
-        ``posenet.runtime``); ``threads`` is the runtimes' intra-op thread count.
+        ``posenet.runtime``); ``threads`` is the runtimes' intra-op thread count; ``flip_test`` averages the pose
+        network's estimates with the mirrored inputs' (None: the checkpoint's setting).
 
         ``load_detector=None`` loads the detector only when ``detector_checkpoint`` is given or shipped detector
         weights exist, and otherwise serves reference-box mode only (with a warning in the log).
         """
         from posenet.infer import PoseEstimator
 
-        pose = PoseEstimator.from_checkpoint(pose_checkpoint, device, precision, backend, threads)
+        pose = PoseEstimator.from_checkpoint(pose_checkpoint, device, precision, backend, threads, flip_test)
         if load_detector is None:
             from detector.infer import DEFAULT_WEIGHTS
 

@@ -42,6 +42,14 @@ class Settings(BaseSettings):
         description="inference runtime of both networks: auto (openvino, else onnxruntime, else torch)",
     )
     threads: int = Field(2, ge=1, le=256, description="torch intra-op threads (torch.set_num_threads)")
+    # posenet.infer.PoseEstimator.from_checkpoint(flip_test=): on the unseen alt look's day 4 the mirrored pass
+    # gained 0.3 cm (7.52 -> 7.21), on the twin 0.1 (docs/RESULTS.md); it doubles the pose stage's U-Net work.
+    flip_test: bool | None = Field(
+        None,
+        description="average the pose network's estimates with those of the mirrored inputs (2x the pose "
+        "network's work; better on looks it was not trained on); unset: the checkpoint's setting (off for the "
+        "shipped weights)",
+    )
     # One inference at a time by default: torch already uses `threads` cores inside one forward pass, and two
     # concurrent passes on the same cores only add latency to both.
     inference_workers: int = Field(1, ge=1, le=64, description="frames processed concurrently by the models")
@@ -130,6 +138,22 @@ class Settings(BaseSettings):
         le=2000,
         description="streams, for scenes that give the room's up direction: persons whose skeleton spans less "
         "than this many mm along it (lying down, e.g. the patient) are answered without a track (0 tracks all)",
+    )
+    # posenet.track.TrackerConfig.lying_height_mm / lying_spread_mm: a track whose first frames both span little
+    # along up and are unsure (the draped patient, half unfolded by the pose network) waits for confirmation.
+    track_lying_height_mm: float = Field(
+        TrackerConfig.lying_height_mm,
+        ge=0,
+        le=2000,
+        description="streams, with the room's up: a new track whose skeleton spans less than this many mm along "
+        "it AND whose joints' median spread is above ORPOSE_TRACK_LYING_SPREAD_MM (medians over its first "
+        "frames) gets no id until that changes: the patient on the table (0: off)",
+    )
+    track_lying_spread_mm: float = Field(
+        TrackerConfig.lying_spread_mm,
+        ge=0,
+        description="streams: the spread (mm) above which a low new track counts as lying "
+        "(ORPOSE_TRACK_LYING_HEIGHT_MM)",
     )
     # Scenes without "up": a stream finds the floor in its first frame's depth images (posenet.rig.check.
     # floor_of_frame: within 0.3 degrees of the room frame on rendered MVOR-rig frames, some tens of ms once).

@@ -36,9 +36,14 @@ def _checkpoint(folder, case: str):
     torch.manual_seed(0)
     # "half": crops from views reduced to 320x240 (the shipped weights' setting). "legacy": a config that
     # records no read size beside a training reader that subsampled by 2, as checkpoints before issue 13 did.
-    inputs = InputConfig(source_size=(320, 240)) if case == "half" else InputConfig()
+    # "flip": "half" with heatmaps 30x sharper, so that the mirrored pass moves the joints by millimetres.
+    inputs = InputConfig(source_size=(320, 240)) if case in ("half", "flip") else InputConfig()
     cfg = ModelConfig(inputs=inputs, precision="fp32")
-    save_checkpoint(folder, PoseNet(cfg), {"model": dataclasses.asdict(cfg), "subsample": 2})
+    model = PoseNet(cfg)
+    if case == "flip":
+        with torch.no_grad():
+            model.unet.head.weight.mul_(30.0)
+    save_checkpoint(folder, model, {"model": dataclasses.asdict(cfg), "subsample": 2})
     return folder
 
 
@@ -58,27 +63,37 @@ def _served(url: str, data) -> dict[tuple[str, int], np.ndarray]:
     return out
 
 
-@pytest.mark.parametrize("case", ["half", "legacy", "shipped"])
+@pytest.mark.parametrize("case", ["half", "legacy", "shipped", "flip"])
 def test_offline_and_served_joints_agree(tmp_path, case):
+    """"flip": a tiny checkpoint with the mirrored pass asked for on both sides (``predict --flip-test``,
+    ``ORPOSE_FLIP_TEST``), which must change the joints."""
     data = write_tiny_mvor(tmp_path / "tiny", days=(1,), frames_per_day=2)
     ckpt = _checkpoint(tmp_path / "pose", case)
 
-    out = tmp_path / "pred.json"
-    argv = ["--data", str(data.root), "--annotations", str(data.annotations), "--out", str(out)]
-    argv += [] if ckpt is None else ["--checkpoint", str(ckpt)]
-    assert predict.main([*argv, "--threads", "1", "--precision", "fp32"]) == 0
-    offline = {
-        (p["image_ids"], p["person_id"]): np.reshape(p["keypoints3D"], (-1, 3))
-        for p in json.loads(out.read_text())
-    }
+    def offline_joints(*extra: str) -> dict:
+        out = tmp_path / "pred.json"
+        argv = ["--data", str(data.root), "--annotations", str(data.annotations), "--out", str(out)]
+        argv += [] if ckpt is None else ["--checkpoint", str(ckpt)]
+        assert predict.main([*argv, "--threads", "1", "--precision", "fp32", *extra]) == 0
+        return {
+            (p["image_ids"], p["person_id"]): np.reshape(p["keypoints3D"], (-1, 3))
+            for p in json.loads(out.read_text())
+        }
+
+    offline = offline_joints(*(["--flip-test"] if case == "flip" else []))
 
     env = {"ORPOSE_BACKEND": "torch", "ORPOSE_PRECISION": "fp32", "ORPOSE_LOAD_DETECTOR": "false"}
     if ckpt is not None:
         env["ORPOSE_POSE_CHECKPOINT"] = str(ckpt)
+    if case == "flip":
+        env["ORPOSE_FLIP_TEST"] = "true"
     with Server(env) as url:
         served = _served(url, data)
 
     assert len(offline) >= 4 and set(served) == set(offline)
+    if case == "flip":
+        plain = offline_joints()
+        assert max(float(np.abs(served[k] - plain[k]).max()) for k in plain) > 10 * TOLERANCE_MM
     worst = max(float(np.abs(served[k] - offline[k]).max()) for k in offline)
     assert worst <= TOLERANCE_MM, f"offline and served joints differ by up to {worst:.3f} mm"
 

@@ -64,6 +64,7 @@ def server(tmp_path_factory):
         "ORPOSE_TRACK_MAX_SPREAD_MM": "5000",
         "ORPOSE_TRACK_MIN_TORSO_MM": "0",
         "ORPOSE_TRACK_MIN_HEIGHT_MM": "0",  # and any height (the client sends the rendered room's up)
+        "ORPOSE_TRACK_LYING_HEIGHT_MM": "0",  # nor wait for a low, unsure skeleton to rise
     }
     with Server(env) as url, httpx.Client(base_url=url, headers=AUTH, timeout=60) as client:
         yield client

@@ -7,7 +7,15 @@ import pytest
 
 from posenet.data.synth.poses import PoseParams, build_pose
 from posenet.skeleton import BONE_TEMPLATE_MM, JOINT_INDEX, NUM_JOINTS
-from posenet.track import Tracker, TrackerConfig, bone_lengths, project_bones, robust_prior, torso_length
+from posenet.track import (
+    Tracker,
+    TrackerConfig,
+    bone_lengths,
+    project_bones,
+    robust_prior,
+    skeleton_height,
+    torso_length,
+)
 from posenet.track_eval import SequenceFrame, TrackedPerson, evaluate, run_tracker, score
 
 FPS = 15.0
@@ -176,7 +184,6 @@ def test_an_unsure_person_continues_a_track_but_never_starts_one():
 def test_a_person_lying_down_is_not_tracked_when_the_room_s_up_is_known():
     """With the room's up direction, a skeleton lying flat (the patient on the table) gets no track, however
     steady and whole its torso; without it, or standing, it does."""
-    from posenet.track import skeleton_height
 
     truth = trajectories(1, 12)[0]  # (F, J, 3) standing, z up
     up = np.array([0.0, 0.0, 3.0])  # any length
@@ -190,6 +197,35 @@ def test_a_person_lying_down_is_not_tracked_when_the_room_s_up_is_known():
         for f in range(12):
             out = tracker.update(skeletons[f][None], spread, f / FPS, up=given)
         assert (out[0].track_id is not None) == tracked
+
+
+def test_a_half_unfolded_lying_skeleton_waits_for_confirmation_and_a_bending_person_does_not():
+    """A skeleton tilted 60 degrees from upright spans ~370 mm along up: above ``min_height_mm``, so each frame alone
+    is trackable. With the spread of an unsure guess (the draped patient) its track is never confirmed; with a
+    clinician's spread it is; a person who rises after three such frames gets their id then, on the same track."""
+    a = np.radians(60)
+    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    tilted = (TEMPLATE - TEMPLATE.mean(0)) @ R.T + [0.0, 0, 1000]  # (J, 3)
+    standing = TEMPLATE - TEMPLATE.mean(0) + [0.0, 0, 1000]
+    up = np.array([0.0, 0, 1])
+    c = TrackerConfig()
+    height = float(skeleton_height(tilted, up))
+    assert c.min_height_mm < height < c.lying_height_mm < float(skeleton_height(standing, up))
+    unsure, sure = c.lying_spread_mm + 100, c.lying_spread_mm - 150
+
+    def ids(frames, spread, given=up, config=None):
+        tracker = Tracker(config)
+        return [
+            tracker.update(x[None], np.full((1, NUM_JOINTS), spread), f / FPS, up=given)[0].track_id
+            for f, x in enumerate(frames)
+        ]
+
+    assert ids([tilted] * 12, unsure) == [None] * 12  # the patient
+    assert ids([tilted] * 12, sure)[2:] == [0] * 10  # a clinician bending over the table
+    assert ids([tilted] * 12, unsure, given=None)[2:] == [0] * 10  # without the room's up the rule is off
+    assert ids([tilted] * 12, unsure, config=TrackerConfig(lying_height_mm=None))[2:] == [0] * 10
+    rising = ids([tilted] * 3 + [standing] * 6, unsure)  # the median of its last three frames
+    assert rising == [None] * 4 + [0] * 5  # two of three standing
 
 
 def test_a_folded_skeleton_is_never_tracked_and_a_whole_one_is():
