@@ -31,7 +31,7 @@ from tqdm import tqdm
 
 from posenet.data.mvor import load_annotations, room_up
 from posenet.execution import machine_line
-from posenet.track import Tracker, TrackerConfig, mean_joint_distance
+from posenet.track import Tracker, TrackerConfig, mean_joint_distance, skeleton_height
 from posenet.track_eval import GATE_MM, GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
 
 
@@ -152,6 +152,31 @@ def served_pairs(
     return [(int(g), ids[t]) for g, t in zip(rows, cols, strict=True) if dist[g, t] <= gate_mm]
 
 
+def births(frames: list[SequenceFrame], tracker: Tracker, near_mm: float = 500.0) -> list[dict]:
+    """Per track the tracker confirms on ``frames``: its first frames' medians (the ``birth_hits`` frames the
+    lying rule of ``TrackerConfig`` judges: height along the frame's up, or None without one, and median joint
+    spread), its frame count, and the share of its frames whose raw skeleton lies within ``near_mm`` (mean joint
+    distance) of an annotated person."""
+    seen = defaultdict(lambda: {"height": [], "spread": [], "near": []})
+    for f in frames:
+        for p in tracker.update(f.joints, f.spread, f.timestamp_s, f.unsure, f.up):
+            if p.track_id is None:
+                continue
+            t = seen[p.track_id]
+            t["height"].append(np.nan if f.up is None else float(skeleton_height(p.raw, f.up)))
+            t["spread"].append(float(np.median(f.spread[p.detection])))
+            d = mean_joint_distance(p.raw[None], f.gt_joints).min() if len(f.gt_joints) else np.inf
+            t["near"].append(bool(d < near_mm))
+    k = tracker.config.birth_hits
+    out = []
+    for track, t in sorted(seen.items()):
+        h = float(np.median(t["height"][:k]))
+        out.append({"track": track, "frames": len(t["near"]), "near_share": round(float(np.mean(t["near"])), 2),
+                    "first_height_mm": None if np.isnan(h) else round(h), "first_spread_mm": round(float(
+                    np.median(t["spread"][:k])))})  # fmt: skip
+    return out
+
+
 def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
@@ -175,6 +200,9 @@ def main(argv: list[str] | None = None) -> dict:
     )
     p.add_argument("--threads", type=int, default=None, help="the runtimes' intra-op threads")
     p.add_argument("--json", type=Path, help="also write the figures here")
+    p.add_argument("--births", action="store_true",
+                   help="also list each confirmed track's first frames (median height along up and spread, the "
+                   "lying rule's inputs) and whether it follows an annotated person (offline tracking)")  # fmt: skip
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a TrackerConfig field (offline tracking), e.g. --set max_spread_mm=500")  # fmt: skip
     args = p.parse_args(argv)
@@ -210,6 +238,11 @@ def main(argv: list[str] | None = None) -> dict:
         report["pipeline_seconds_per_frame"] = round(float(np.mean(seconds)), 3)
         for seq, rows in sequences(gt, detections).items():
             report["sequences"][seq] = evaluate([f for _, f in rows], Tracker(config))
+            if args.births:
+                report["sequences"][seq]["births"] = rows_of = births([f for _, f in rows], Tracker(config))
+                for b in rows_of:
+                    print(f"sequence {seq} track {b['track']}: {b['frames']} frames, {b['near_share']:.0%} near a "
+                          f"person; first frames {b['first_height_mm']} mm along up, spread {b['first_spread_mm']} mm")  # fmt: skip
     for seq, figures in report["sequences"].items():
         print(f"sequence {seq}: {figures['frames']} frames")
         for line in goal_lines(figures):

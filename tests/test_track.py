@@ -386,3 +386,31 @@ def test_the_smoothing_bound_reads_a_known_offset_and_averages_noise(monkeypatch
     r = ratios({(1, 0): still})
     assert r["raw joints"] == 1.0 and r["the service's smoothed joints (causal)"] == 0.0
     assert r["centred mean of 15 frames"] < r["centred mean of 3 frames"] < 0.8
+
+
+def test_births_list_each_track_s_first_frames(monkeypatch):
+    """benchmarks/tracking.py --births: a walker (annotated) and a lying, unsure person (nobody) give two tracks
+    with the rules off, each with its first frames' height along up and spread, and whether it follows a person;
+    with the lying rule on, only the walker is confirmed."""
+    import sys
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    sys.modules.pop("tracking", None)
+    from tracking import births
+
+    walker = trajectories(1, 10)[0]  # (N, J, 3), z up
+    flat = TEMPLATE[:, [2, 1, 0]] + [3000.0, 0, 0]  # lying far from the walker
+    frames = [
+        SequenceFrame(
+            timestamp_s=f / FPS, gt_ids=np.array([7]), gt_joints=walker[f][None],
+            joints=np.stack([walker[f], flat]), spread=np.array([[200.0] * NUM_JOINTS, [550.0] * NUM_JOINTS]),
+            up=np.array([0.0, 0, 1]),
+        )
+        for f in range(10)
+    ]  # fmt: skip
+    off = births(frames, Tracker(TrackerConfig(min_height_mm=0, lying_height_mm=None)))
+    assert [(b["near_share"], b["first_spread_mm"]) for b in off] == [(1.0, 200), (0.0, 550)]
+    assert off[0]["first_height_mm"] > 500 > 200 > off[1]["first_height_mm"] and off[0]["frames"] == 8
+    on = births(frames, Tracker(TrackerConfig(min_height_mm=0)))
+    assert [b["near_share"] for b in on] == [1.0]
