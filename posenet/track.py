@@ -259,6 +259,9 @@ def robust_prior(
 class Tracker:
     """Online multi-person tracker over one stream of frames (see the module docstring)."""
 
+    # the per-track arrays, first axis T
+    _PER_TRACK = ("pos", "vel", "cov", "ids", "hits", "unseen_s", "unseen", "bones", "frames_seen", "recent")
+
     def __init__(self, config: TrackerConfig | None = None) -> None:
         self.config = config or TrackerConfig()
         c = self.config
@@ -282,7 +285,7 @@ class Tracker:
         return len(self.ids)
 
     def _keep(self, keep: np.ndarray) -> None:
-        for name in ("pos", "vel", "cov", "ids", "hits", "unseen_s", "unseen", "bones", "frames_seen", "recent"):
+        for name in self._PER_TRACK:
             setattr(self, name, getattr(self, name)[keep])
 
     def _moved(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -343,13 +346,21 @@ class Tracker:
             raise ValueError("joints and spread must be finite")
         return joints, spread
 
-    def _usable(self, joints: np.ndarray, spread: np.ndarray, up: np.ndarray | None) -> np.ndarray:
-        """``(P,)`` the persons a track may take (spread, torso and, with the room's up, height; step 1)."""
+    @staticmethod
+    def _measures(
+        joints: np.ndarray, spread: np.ndarray, up: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(P,)`` each person's median joint spread and ``(P,)`` height along ``up`` (NaN without one): what the
+        rules of steps 1 and 2 read."""
+        height = np.full(len(joints), np.nan) if up is None else skeleton_height(joints, up)
+        return np.median(spread, axis=1), height
+
+    def _usable(self, joints: np.ndarray, spread_median: np.ndarray, height: np.ndarray) -> np.ndarray:
+        """``(P,)`` the persons a track may take (spread, torso and, with the room's up, height; step 1), from
+        :meth:`_measures`."""
         c = self.config
-        usable = (np.median(spread, axis=1) <= c.max_spread_mm) & (torso_length(joints) >= c.min_torso_mm)
-        if up is not None:
-            usable &= skeleton_height(joints, up) >= c.min_height_mm
-        return usable
+        usable = (spread_median <= c.max_spread_mm) & (torso_length(joints) >= c.min_torso_mm)
+        return usable & ~(height < c.min_height_mm)  # a NaN height (no up) keeps the person
 
     def _lying(self) -> np.ndarray:
         """``(T,)`` the tracks whose last ``birth_hits`` frames look like a person lying down (step 2)."""
@@ -397,7 +408,8 @@ class Tracker:
             return True  # update will refuse the frame; nothing to save
         joints, spread = self._persons(joints, spread)
         pos = self._moved(timestamp_s - self.time)[1]  # where update will predict the tracks
-        track_of = self._claims(mean_joint_distance(pos, joints), self._usable(joints, spread, up))
+        usable = self._usable(joints, *self._measures(joints, spread, up))
+        track_of = self._claims(mean_joint_distance(pos, joints), usable)
         left = confirmed & ~np.isin(np.arange(self.num_tracks), track_of)
         if within is None or not left.any():
             return bool(left.any())
@@ -437,7 +449,8 @@ class Tracker:
         # 1. assignment under the gate
         n_tracks, n_dets = self.num_tracks, len(joints)
         unsure = np.zeros(n_dets, bool) if unsure is None else np.asarray(unsure, bool).reshape(n_dets)
-        usable = self._usable(joints, spread, up)  # (P,)
+        spread_median, height = self._measures(joints, spread, up)  # (P,) each
+        usable = self._usable(joints, spread_median, height)  # (P,)
         track_of = np.full(n_dets, -1)
         if n_tracks and n_dets:
             cost = mean_joint_distance(self.pos, joints)  # (T, P)
@@ -470,9 +483,8 @@ class Tracker:
         self.hits[n_tracks:] = 1
         have = np.flatnonzero(track_of >= 0)
         rows = track_of[have]
-        height = np.full(len(have), np.nan) if up is None else skeleton_height(joints[have], up)
         self.recent[rows, self.frames_seen[rows] % c.birth_hits] = np.stack(
-            [height, np.median(spread[have], axis=1)], axis=-1
+            [height[have], spread_median[have]], axis=-1
         )
         confirm = (self.ids < 0) & (self.hits >= c.birth_hits) & ~self._lying()
         self.ids[confirm] = np.arange(self.next_id, self.next_id + confirm.sum())

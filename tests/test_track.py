@@ -184,7 +184,6 @@ def test_an_unsure_person_continues_a_track_but_never_starts_one():
 def test_a_person_lying_down_is_not_tracked_when_the_room_s_up_is_known():
     """With the room's up direction, a skeleton lying flat (the patient on the table) gets no track, however
     steady and whole its torso; without it, or standing, it does."""
-
     truth = trajectories(1, 12)[0]  # (F, J, 3) standing, z up
     up = np.array([0.0, 0.0, 3.0])  # any length
     flat = TEMPLATE[:, [2, 1, 0]]  # turned about the y axis: head to feet along x, flat in z
