@@ -247,6 +247,7 @@ def match_skeletons(
     ok: np.ndarray,
     config: SkeletonMatchConfig | None = None,
     max_combinations: float | None = None,
+    centres: np.ndarray | None = None,
 ) -> list[Group]:
     """Group the boxes of V views into persons by their single-view skeletons.
 
@@ -254,12 +255,16 @@ def match_skeletons(
         boxes: V arrays ``(K_v, 4)`` xyxy pixels; depths, cameras: as ``detector.matching.match_boxes``.
         joints: (N, J, 3) the single-view skeleton of each of the N = sum K_v boxes, in view order
             (``BoxHeatmaps.single_view``); ok: (N, J) its joints with valid depth.
+        centres: (N, 3) the boxes' ``detector.matching.box_centres_3d``, when already known.
 
     Returns:
         :class:`detector.matching.Group` s in :func:`group_skeletons`' order; in a view where a person holds
         several boxes, ``indices`` names the first and ``extra`` the others.
     """
-    centres, view = box_centres_3d(boxes, depths, cameras)
+    if centres is None:
+        centres, view = box_centres_3d(boxes, depths, cameras)
+    else:
+        view = np.repeat(np.arange(len(boxes)), [len(np.asarray(b).reshape(-1, 4)) for b in boxes])
     V = len(boxes)
     local = np.arange(len(view)) - box_starts(boxes)[view]
     groups = []
@@ -325,6 +330,7 @@ def match_heatmaps(
     max_combinations: float | None = None,
     candidate: Sequence[np.ndarray] | None = None,
     detected: bool = False,
+    centres: np.ndarray | None = None,
 ) -> list[Group]:
     """Lift each box of ``heat`` (a ``posenet.box_poses.BoxHeatmaps`` of ``boxes``) alone and group the boxes.
 
@@ -336,17 +342,19 @@ def match_heatmaps(
     ``candidate``: per view ``(K_v,)`` bool, the boxes the detector was unsure of (below its threshold): they
     are left out of the grouping and may then complete persons (step 5 of the module docstring); those that
     do not stay in no group. Fuse the groups from the same heatmaps with
-    ``heat.estimate(members_of(groups, boxes))``."""
+    ``heat.estimate(members_of(groups, boxes))``. ``centres``: (N, 3) every box's ``box_centres_3d``, when
+    already known (:func:`group_unsure` may read them again)."""
     config = config or SkeletonMatchConfig()
     joints, ok = _lifted(heat.single_view())  # (N, J, 3), (N, J)
     depths, cameras = [v.depth for v in views], [v.camera for v in views]
     if candidate is None or not any(np.any(c) for c in candidate):
-        groups = match_skeletons(boxes, depths, cameras, joints, ok, config, max_combinations)
+        groups = match_skeletons(boxes, depths, cameras, joints, ok, config, max_combinations, centres)
     else:
         sure = [~np.asarray(c, bool).reshape(-1) for c in candidate]
         flat = np.concatenate(sure)
         groups = match_skeletons([np.asarray(b).reshape(-1, 4)[k] for b, k in zip(boxes, sure, strict=True)],
-                                 depths, cameras, joints[flat], ok[flat], config, max_combinations)  # fmt: skip
+                                 depths, cameras, joints[flat], ok[flat], config, max_combinations,
+                                 None if centres is None else centres[flat])  # fmt: skip
         groups = _in_full_lists(groups, sure)
         if config.candidate_mm is not None and groups:
             groups = admit_candidates(heat, groups, boxes, candidate, joints, ok, config.candidate_mm)
@@ -388,10 +396,12 @@ def group_unsure(
     candidate: Sequence[np.ndarray] | None,
     config: SkeletonMatchConfig | None = None,
     max_combinations: float | None = None,
+    centres: np.ndarray | None = None,
 ) -> list[Group]:
     """The persons of the unsure boxes that ``groups`` (:func:`match_heatmaps`' persons) left out: step 8 of the
     module docstring. They are grouped as the sure boxes are (steps 1-4) and dropped where another view should
-    have seen them (step 7); fuse them with ``heat.estimate(members_of(unsure, boxes))``.
+    have seen them (step 7); fuse them with ``heat.estimate(members_of(unsure, boxes))``. ``centres``: as
+    :func:`match_heatmaps`'.
 
     They are no person of the frame on their own: a tracker may take one to continue a track it already has."""
     left = unsure_left(groups, candidate)
@@ -403,6 +413,7 @@ def group_unsure(
     unsure = match_skeletons(
         [np.asarray(b).reshape(-1, 4)[m] for b, m in zip(boxes, left, strict=True)],
         [v.depth for v in views], [v.camera for v in views], joints[flat], ok[flat], config, max_combinations,
+        None if centres is None else centres[flat],
     )  # fmt: skip
     unsure = _in_full_lists(unsure, left)
     return drop_unseen(unsure, views, boxes, joints, ok, config.free_space_mm, config.min_visible_joints)

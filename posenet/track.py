@@ -406,17 +406,18 @@ class Tracker:
             return False
         if self.time is not None and not timestamp_s > self.time:
             return True  # update will refuse the frame; nothing to save
-        joints, spread = self._persons(joints, spread)
         pos = self._moved(timestamp_s - self.time)[1]  # where update will predict the tracks
+        if within is not None:  # first the tracks the unsure persons could reach at all: often none
+            lo, hi = (np.asarray(b, float) for b in within)
+            nearest = np.clip(pos[confirmed], lo, hi)  # (T', J, 3): each joint's nearest point of its box
+            bound = np.linalg.norm(pos[confirmed] - nearest, axis=-1).mean(-1)  # (T',) mm
+            confirmed[confirmed] = bound <= c.unsure_gate_mm + 1.0  # 1 mm for the persons' float32 rounding
+            if not confirmed.any():
+                return False
+        joints, spread = self._persons(joints, spread)
         usable = self._usable(joints, *self._measures(joints, spread, up))
         track_of = self._claims(mean_joint_distance(pos, joints), usable)
-        left = confirmed & ~np.isin(np.arange(self.num_tracks), track_of)
-        if within is None or not left.any():
-            return bool(left.any())
-        lo, hi = (np.asarray(b, float) for b in within)
-        nearest = np.clip(pos[left], lo, hi)  # (T', J, 3): each joint's nearest point of its box
-        bound = np.linalg.norm(pos[left] - nearest, axis=-1).mean(-1)  # (T',) mm
-        return bool((bound <= c.unsure_gate_mm + 1.0).any())  # 1 mm for the persons' float32 rounding
+        return bool((confirmed & ~np.isin(np.arange(self.num_tracks), track_of)).any())
 
     def update(
         self,

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from detector.matching import box_centres_3d, combination_bound
 from detector.skeleton_matching import (
     CANDIDATE_SCORE,
     SkeletonMatchConfig,
@@ -36,6 +37,7 @@ from detector.skeleton_matching import (
 from posenet.boxes import ground_truth_ids, hull, identified
 from posenet.data.sample import Sample
 from posenet.evaluate import prediction_record
+from posenet.lifting import JointEstimate
 from posenet.scene import Scene, SceneView, views_of
 
 
@@ -115,10 +117,29 @@ class SceneResult:
     mode: str  # "reference_boxes" or "detector"
     persons: list[PersonResult]
     timings: dict[str, float] = field(default_factory=dict)
+    # ms of timings["match"] spent on the persons of unsure boxes for a tracker (``run(unsure=...)``): asking it
+    # whether it can use them, and grouping them when it can; what a stream adds beside the tracker's update
+    unsure_ms: float = 0.0
 
 
 def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
+
+
+def fused(heat, matched: list, unsure: list, boxes: list[np.ndarray], sure=None) -> JointEstimate:
+    """``heat.estimate`` of the persons ``matched + unsure`` (``detector.matching.Group`` s of ``boxes``); with
+    ``sure``, the estimate of ``matched`` already made, only the ``unsure`` ones are fused (each person is fused
+    from its own boxes alone, so the result is the same)."""
+    if sure is None:
+        return heat.estimate(members_of(matched + unsure, boxes))
+    if not unsure:
+        return sure
+    more = heat.estimate(members_of(unsure, boxes))
+    return JointEstimate(
+        torch.cat([sure.joints, more.joints]),
+        torch.cat([sure.confidence, more.confidence]),
+        torch.cat([sure.has_points, more.has_points]),
+    )
 
 
 def group_by_ids(person_ids: list[np.ndarray]) -> tuple[list[int], list[list[int]]]:
@@ -212,8 +233,6 @@ class ScenePipeline:
     # ----------------------------------------------------------------------------------------- stages
     def _combination_bound(self, boxes: list[np.ndarray], views: list[SceneView]) -> float:
         """An upper bound on the combinations the centre matcher will enumerate (``combination_bound``)."""
-        from detector.matching import box_centres_3d, combination_bound
-
         centres, view = box_centres_3d(boxes, [v.depth for v in views], [v.camera for v in views])
         dist = np.linalg.norm(centres[:, None] - centres[None, :], axis=-1)  # (N, N), NaN without depth
         return combination_bound(dist, view, len(views), self.config.match_threshold_mm)
@@ -297,7 +316,7 @@ class ScenePipeline:
             ids, groups = group_by_ids(person_ids)
         elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
             boxes, scores, candidate = self._fit_boxes(boxes, scores, limit, why, candidate)
-            heat, timings["match"], matched = self._match_skeletons(
+            heat, timings["match"], matched, centres = self._match_skeletons(
                 boxes, views, candidate, detected=scores[0] is not None
             )
             all_matched = matched
@@ -317,14 +336,22 @@ class ScenePipeline:
         left = (
             None if not unsure or heat is None or scores[0] is None else unsure_left(all_matched, candidate)
         )
+        sure = None  # the fusion of the frame's own persons, when the tracker's question needs it first
+        unsure_ms = 0.0
         if left is not None:  # unsure boxes no person took: their persons, for a tracker (when it asks)
-            t1 = time.perf_counter()
-            if not callable(unsure) or self._asks(unsure, heat, matched, boxes, left):
+            t1, fuse_ms = time.perf_counter(), 0.0
+            if callable(unsure):  # the fusion is the pose stage's work, asked or not: made once, counted there
+                t2 = time.perf_counter()
+                sure = heat.estimate(members_of(matched, boxes))
+                fuse_ms = _ms(t2)
+            if not callable(unsure) or self._asks(unsure, heat, sure, left):
                 unsure_groups = group_unsure(
                     heat, views, boxes, all_matched, candidate,
-                    self._skeleton_config(), self.config.max_match_combinations,
+                    self._skeleton_config(), self.config.max_match_combinations, centres,
                 )  # fmt: skip
-            timings["match"] += _ms(t1)
+            unsure_ms = _ms(t1) - fuse_ms
+            timings["match"] += unsure_ms
+            timings["pose"] += fuse_ms
         if unsure_groups:  # after the frame's persons, within the same limit
             unsure_groups = unsure_groups[: max(limit - len(groups), 0)]
             ids = ids + list(range(len(groups), len(groups) + len(unsure_groups)))
@@ -345,7 +372,7 @@ class ScenePipeline:
         if persons:
             # The skeleton matcher's heatmaps: fuse its groups without another U-Net pass.
             if heat is not None:
-                prediction = heat.estimate(members_of(matched + unsure_groups, boxes))
+                prediction = fused(heat, matched, unsure_groups, boxes, sure)
             else:
                 scene = Scene.from_person_boxes(views, [p.boxes for p in persons], [p.id for p in persons])
                 prediction = self.pose.predict(scene)
@@ -360,7 +387,8 @@ class ScenePipeline:
             has_points = np.asarray(prediction.has_points, dtype=bool)  # (P,)
             persons = [p for p, ok in zip(persons, has_points, strict=True) if ok]
         timings["pose"] += _ms(t0)
-        return SceneResult("detector" if scores[0] is not None else "reference_boxes", persons, timings)
+        mode = "detector" if scores[0] is not None else "reference_boxes"
+        return SceneResult(mode, persons, timings, unsure_ms)
 
     @staticmethod
     def _person_boxes(members: list[tuple[int, ...]], boxes, scores) -> tuple[list, list]:
@@ -405,10 +433,9 @@ class ScenePipeline:
         return split_unsure(boxes, scores, threshold)
 
     @staticmethod
-    def _asks(unsure, heat, matched, boxes, left) -> bool:
-        """``run``'s ``unsure`` function asked about the frame's persons as they will be answered (fused, those
-        with points) and the box the leftover unsure boxes' persons would lie in."""
-        sure = heat.estimate(members_of(matched, boxes))
+    def _asks(unsure, heat, sure, left) -> bool:
+        """``run``'s ``unsure`` function asked about the frame's persons as they will be answered (``sure``, their
+        fusion; those with points) and the box the leftover unsure boxes' persons would lie in."""
         has = np.asarray(sure.has_points, dtype=bool)
         return unsure(
             np.asarray(sure.joints, np.float64)[has],
@@ -430,12 +457,14 @@ class ScenePipeline:
     ):
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
-        Returns ``(heat, match_ms, groups)``: the heatmaps to fuse from, the milliseconds of the association (after
-        the U-Net and each box's softmax moments, which the fusion needs with any grouping), and the persons
-        (``detector.matching.Group``)."""
+        Returns ``(heat, match_ms, groups, centres)``: the heatmaps to fuse from, the milliseconds of the
+        association (after the U-Net and each box's softmax moments, which the fusion needs with any grouping),
+        the persons (``detector.matching.Group``), and every box's 3D centre (N, 3) (``group_unsure`` reads
+        them again)."""
         heat = self.pose.box_heatmaps(list(views), boxes)
         heat.reduce()  # the fusion's per-box softmax, needed whatever groups the boxes: the pose stage's
         t0 = time.perf_counter()
+        centres = box_centres_3d(boxes, [v.depth for v in views], [v.camera for v in views])[0]
         groups = match_heatmaps(
             heat,
             views,
@@ -444,8 +473,9 @@ class ScenePipeline:
             max_combinations=self.config.max_match_combinations,
             candidate=candidate,
             detected=detected,
+            centres=centres,
         )
-        return heat, _ms(t0), groups
+        return heat, _ms(t0), groups, centres
 
     # ----------------------------------------------------------------------------------------- offline
     def run_sample(self, sample: Sample, reference_boxes: bool = True) -> tuple[SceneResult, list[dict]]:

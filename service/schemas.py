@@ -242,6 +242,12 @@ class TrackedPerson(Person):
 
 class StreamTimings(Timings):
     track: float = Field(..., description="the tracker's update for this frame, ms")
+    unsure: float = Field(
+        0.0,
+        description="of match: asking the tracker whether a person of boxes the detector was unsure of could "
+        "continue one of its tracks, and grouping those boxes into persons when one could (with track, what "
+        "tracking adds to a frame), ms",
+    )
     floor: float = Field(
         0.0,
         description="looking for the floor in the depth images, for the room's up (a stream's first frame of a "

@@ -335,7 +335,9 @@ class Frame:
             mode=out.mode,
             persons=persons,
             notes=out.notes,
-            timings=StreamTimings(**out.timings.model_dump(), track=track_ms, floor=self.floor_ms),
+            timings=StreamTimings(
+                **out.timings.model_dump(), track=track_ms, unsure=result.unsure_ms, floor=self.floor_ms
+            ),
             stream=StreamState(
                 id=stream.id, frames=stream.frames, timestamp_s=self.time, clock=stream.clock, up=up_source
             ),

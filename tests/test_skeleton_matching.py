@@ -416,6 +416,15 @@ def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny
     np.testing.assert_array_equal(seen[0][0], np.array([p.joints for p in result.persons]).reshape(-1, 10, 3))
     np.testing.assert_array_equal(seen[0][1], np.array([p.spread_mm for p in result.persons]).reshape(-1, 10))
     assert [p.box_indices for p in yes.persons] == [p.box_indices for p in both.persons]
+    # asked, the frame's own persons are fused once (for the question and the answer): the same joints
+    np.testing.assert_array_equal(
+        np.array([p.joints for p in yes.persons]), np.array([p.joints for p in both.persons])
+    )
+    np.testing.assert_array_equal(
+        np.array([p.joints for p in no.persons]), np.array([p.joints for p in result.persons])
+    )
+    # what finding them cost is reported apart (SceneResult.unsure_ms, a stream's timings.unsure), inside match
+    assert result.unsure_ms == 0 and 0 < yes.unsure_ms <= yes.timings["match"] and 0 < no.unsure_ms
     assert [p.box_indices for p in no.persons] == [p.box_indices for p in result.persons]
     assert not any(p.unsure for p in no.persons)
     # the box it is given holds every person of unsure boxes that the frame can give (BoxHeatmaps.joint_bounds)

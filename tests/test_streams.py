@@ -199,6 +199,23 @@ def test_the_offline_benchmark_finds_the_floor_as_a_stream_does(sequence, tmp_pa
     assert not any("up" in json.loads(line) for line in (tmp_path / "room.jsonl").read_text().splitlines())
 
 
+def test_the_offline_benchmark_measures_what_tracking_adds_to_a_stream_frame(sequence, monkeypatch):
+    """benchmarks/tracking.py --cost: every frame of the sequence, in time order, through the pipeline with a
+    tracker asked as a stream asks it; per sequence the frames and the milliseconds of each part and their sum."""
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    sys.modules.pop("tracking", None)
+    from tracking import stream_cost
+
+    cost = stream_cost(sequence.root, sequence.gt, "torch", 1)
+    assert sum(c["frames"] for c in cost.values()) == FRAMES
+    for c in cost.values():
+        assert c["unsure_ms_mean"] >= 0 and c["update_ms_mean"] > 0
+        assert c["adds_ms_mean"] == pytest.approx(c["unsure_ms_mean"] + c["update_ms_mean"], abs=2e-3)
+        assert c["adds_ms_p95"] >= c["update_ms_mean"] / 2
+
+
 def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequence):
     answers = [ok(frame(server, "seq-a", sequence, k, t)) for k, t in enumerate(sequence.times)]
     try:
@@ -206,6 +223,7 @@ def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequ
             assert out["stream"] == {"id": "seq-a", "frames": k + 1, "timestamp_s": sequence.times[k],
                                      "clock": "client", "up": "scene"}  # fmt: skip
             assert out["mode"] == "reference_boxes" and out["timings"]["track"] >= 0
+            assert out["timings"]["unsure"] == 0  # reference boxes: no unsure boxes to find persons in
             for p in out["persons"]:
                 assert [j["name"] for j in p["smoothed_joints"]] == list(JOINTS)
                 assert p["unsure"] is False  # reference boxes: nobody the detector was unsure of
