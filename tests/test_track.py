@@ -235,7 +235,8 @@ def test_a_folded_skeleton_is_never_tracked_and_a_whole_one_is():
     folded = truth.copy()
     hips = [JOINT_INDEX["left_hip"], JOINT_INDEX["right_hip"]]
     neck = folded[:, [JOINT_INDEX["neck"]]]
-    folded[:, hips] = neck + (folded[:, hips] - neck) * 0.5  # the torso at half its length
+    folded[:, hips] = neck + (folded[:, hips] - neck) * 0.4  # the torso at 40 % of its length
+    assert (torso_length(folded) < TrackerConfig().min_torso_mm).all()
     for skeletons, expect in ((folded, None), (truth, 0)):
         tracker = Tracker()
         for f in range(20):
