@@ -212,11 +212,13 @@ def project_bones(
     move = _TO_A[None] * wa[:, None, :] - _TO_B[None] * (1 - wa)[:, None, :]
     known = np.isfinite(prior)
     target = np.where(known, prior, 0.0)
+    high = np.where(known, float(tolerance), np.inf)  # a bone without a prior is never out of its band
+    low = -high
     for _ in range(iterations):
         d = _BONE_OF @ x  # (T, B, 3)
         length = np.maximum(np.sqrt((d * d).sum(-1)), 1e-6)  # (T, B)
         excess = length - target
-        err = np.where(known, excess - np.clip(excess, -tolerance, tolerance), 0.0)
+        err = excess - np.minimum(np.maximum(excess, low), high)  # np.clip's values, without its overhead
         if not err.any():
             break
         x += move @ ((RELAXATION * err / length)[..., None] * d)  # shortens (err > 0) or lengthens each bone
@@ -233,14 +235,25 @@ def _median(values: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
     return np.where(count > 0, median, np.nan), count
 
 
+def frame_scales(lengths: np.ndarray) -> np.ndarray:
+    """``(...)`` each skeleton's scale against the average adult: the median over bones of its bone ``lengths
+    (..., B)`` over ``BONE_TEMPLATE_MM`` (NaN ignored; NaN without any)."""
+    return _median(lengths / np.asarray(BONE_TEMPLATE_MM), -1)[0]
+
+
 def robust_prior(
-    history: np.ndarray, min_count: int, template_frames: float = 0.0, scale_prior_frames: float = 0.0
+    history: np.ndarray,
+    min_count: int,
+    template_frames: float = 0.0,
+    scale_prior_frames: float = 0.0,
+    scales: np.ndarray | None = None,
 ) -> np.ndarray:
     """``(T, B)`` each bone's length prior from ``history (T, H, B)`` of measured lengths (NaN: none yet).
 
     The median of the bone's lengths, pulled towards ``BONE_TEMPLATE_MM`` scaled to the person with the weight of
     ``template_frames`` measured frames (inf: the scaled template alone). The person's scale is the median over
-    frames of each frame's median over bones of length / template, pulled towards 1 (the average adult) with the
+    frames of each frame's median over bones of length / template (:func:`frame_scales`; ``scales (T, H)`` when
+    already known, as a tracker keeps them beside the history), pulled towards 1 (the average adult) with the
     weight of ``scale_prior_frames`` frames. NaN where fewer than ``min_count`` lengths of a bone are known."""
     if math.isinf(template_frames):  # the scaled template alone: only how many lengths are known matters
         median, count = None, np.isfinite(history).sum(1)  # (T, B)
@@ -248,7 +261,7 @@ def robust_prior(
         median, count = _median(history, 1)  # (T, B)
     if template_frames > 0:
         template = np.asarray(BONE_TEMPLATE_MM)
-        per_frame, _ = _median(history / template, 2)  # (T, H) each frame's scale
+        per_frame = frame_scales(history) if scales is None else scales  # (T, H) each frame's scale
         scale, frames = _median(per_frame, 1)  # (T,)
         scale = (frames * np.nan_to_num(scale) + scale_prior_frames) / np.maximum(
             frames + scale_prior_frames, 1e-9
@@ -266,7 +279,9 @@ class Tracker:
     """Online multi-person tracker over one stream of frames (see the module docstring)."""
 
     # the per-track arrays, first axis T
-    _PER_TRACK = ("pos", "vel", "cov", "ids", "hits", "unseen_s", "unseen", "bones", "frames_seen", "recent")
+    _PER_TRACK = (
+        "pos", "vel", "cov", "ids", "hits", "unseen_s", "unseen", "bones", "scales", "frames_seen", "recent"
+    )  # fmt: skip
 
     def __init__(self, config: TrackerConfig | None = None) -> None:
         self.config = config or TrackerConfig()
@@ -280,6 +295,7 @@ class Tracker:
         self.unseen_s = np.zeros(0)  # seconds since the last detection
         self.unseen = np.zeros(0, int)  # frames since the last detection
         self.bones = np.zeros((0, c.bone_history, len(BONES)))  # (T, H, B) measured lengths, NaN: none yet
+        self.scales = np.zeros((0, c.bone_history))  # (T, H) frame_scales of those lengths, kept beside them
         self.frames_seen = np.zeros(0, int)  # frames with a detection, over the track's life
         # (T, birth_hits, 2): height along up (NaN without an up) and median spread of its last frames, by frames_seen
         self.recent = np.zeros((0, c.birth_hits, 2))
@@ -336,6 +352,7 @@ class Tracker:
         self.unseen_s = np.concatenate([self.unseen_s, np.zeros(n)])
         self.unseen = np.concatenate([self.unseen, np.zeros(n, int)])
         self.bones = np.concatenate([self.bones, np.full((n, c.bone_history, len(BONES)), np.nan)])
+        self.scales = np.concatenate([self.scales, np.full((n, c.bone_history), np.nan)])
         self.frames_seen = np.concatenate([self.frames_seen, np.zeros(n, int)])
         self.recent = np.concatenate([self.recent, np.full((n, c.birth_hits, 2), np.nan)])
 
@@ -497,12 +514,15 @@ class Tracker:
         self.ids[confirm] = np.arange(self.next_id, self.next_id + confirm.sum())
         self.next_id += int(confirm.sum())
         # 3. bone-length prior and correction, for the tracks seen in this frame
-        self.bones[rows, self.frames_seen[rows] % c.bone_history] = bone_lengths(joints[have])
+        lengths, slot = bone_lengths(joints[have]), self.frames_seen[rows] % c.bone_history  # (M, B), (M,)
+        self.bones[rows, slot] = lengths
+        self.scales[rows, slot] = frame_scales(lengths)
         self.frames_seen[rows] += 1
         if len(rows):
             prior = robust_prior(
-                self.bones[rows], c.bone_min_frames, c.bone_template_frames, c.bone_scale_prior_frames
-            )
+                self.bones[rows], c.bone_min_frames, c.bone_template_frames, c.bone_scale_prior_frames,
+                self.scales[rows],
+            )  # fmt: skip
             self.pos[rows] = project_bones(
                 self.pos[rows], prior, self.cov[rows, :, 0, 0], c.bone_tolerance_mm, c.bone_iterations
             )

@@ -11,6 +11,7 @@ from posenet.track import (
     Tracker,
     TrackerConfig,
     bone_lengths,
+    frame_scales,
     project_bones,
     robust_prior,
     skeleton_height,
@@ -311,6 +312,8 @@ def test_bone_prior_is_the_template_scaled_to_the_person():
     history[0, 5:8, 3] = 2000.0  # a few wild lengths of one bone do not move a median
     prior = robust_prior(history, 1, np.inf, 0.0)[0]
     np.testing.assert_allclose(prior / template, 1.1, atol=0.02)  # one scale, every bone in proportion
+    # the per-frame scales a tracker keeps beside its history give the same prior
+    np.testing.assert_array_equal(robust_prior(history, 1, np.inf, 0.0, frame_scales(history))[0], prior)
     own = robust_prior(history, 1, 0.0)[0]  # each bone's own median: noisier proportions
     assert np.abs(own / template - 1.1).max() > np.abs(prior / template - 1.1).max()
     # Young tracks lean on the average adult: after 2 frames, a prior of 10 frames keeps the scale near 1.
