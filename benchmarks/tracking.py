@@ -88,7 +88,7 @@ def stream_cost(data: Path, gt: dict, backend: str, threads: int | None) -> dict
     the tracker (asking it, and grouping them when it can use them: ``SceneResult.unsure_ms``) and its update."""
     from posenet.predict import read_dataset
     from posenet.scene import views_of
-    from service.pipeline import ScenePipeline
+    from service.pipeline import ScenePipeline, TrackerQuestions
 
     pipe = ScenePipeline.from_checkpoints(backend=backend, threads=threads)
     ds = read_dataset(data, gt, pipe.read_size)
@@ -99,10 +99,13 @@ def stream_cost(data: Path, gt: dict, backend: str, threads: int | None) -> dict
         tracker, unsure_ms, update_ms = Tracker(), [], []
         for frame_id, frame in tqdm(rows, desc=f"sequence {seq}", unit="frame"):
             t = frame.timestamp_s
-            result = pipe.run(
-                views_of(ds[index[frame_id]]),
-                unsure=lambda j, s, within, t=t, tracker=tracker: tracker.needs_unsure(j, s, t, up, within),
+            questions = TrackerQuestions(  # as a stream asks its tracker (service.streams.Frame.prepare)
+                targets=lambda j, s, within, t=t, tracker=tracker: tracker.unsure_targets(
+                    j, s, t, up, within
+                ),
+                gate_mm=tracker.config.unsure_gate_mm or 0.0,
             )
+            result = pipe.run(views_of(ds[index[frame_id]]), unsure=questions)
             joints = np.array([p.joints for p in result.persons], float).reshape(-1, 10, 3)
             spread = np.array([p.spread_mm for p in result.persons], float).reshape(-1, 10)
             unsure = np.array([p.unsure for p in result.persons], bool)

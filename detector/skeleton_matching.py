@@ -397,11 +397,14 @@ def group_unsure(
     config: SkeletonMatchConfig | None = None,
     max_combinations: float | None = None,
     centres: np.ndarray | None = None,
+    reaches=None,
 ) -> list[Group]:
     """The persons of the unsure boxes that ``groups`` (:func:`match_heatmaps`' persons) left out: step 8 of the
     module docstring. They are grouped as the sure boxes are (steps 1-4) and dropped where another view should
     have seen them (step 7); fuse them with ``heat.estimate(members_of(unsure, boxes))``. ``centres``: as
-    :func:`match_heatmaps`'.
+    :func:`match_heatmaps`'. ``reaches``: a function of their fused joints ``(Q, J, 3)`` giving ``(Q,)`` bool, the
+    persons worth finishing (a tracker's ``Tracker.reaches_unsure``); the others are left out before step 7,
+    which costs most (each person's other views checked one by one).
 
     They are no person of the frame on their own: a tracker may take one to continue a track it already has."""
     left = unsure_left(groups, candidate)
@@ -416,6 +419,9 @@ def group_unsure(
         None if centres is None else centres[flat],
     )  # fmt: skip
     unsure = _in_full_lists(unsure, left)
+    if reaches is not None and unsure:
+        fused = heat.estimate(members_of(unsure, boxes)).joints.double().numpy()  # as they will be answered
+        unsure = [g for g, keep in zip(unsure, np.asarray(reaches(fused), bool), strict=True) if keep]
     return drop_unseen(unsure, views, boxes, joints, ok, config.free_space_mm, config.min_visible_joints)
 
 

@@ -186,6 +186,16 @@ def torso_length(joints: np.ndarray) -> np.ndarray:
     return np.linalg.norm(joints[..., JOINT_INDEX["neck"], :] - hips, axis=-1)
 
 
+def reaching(targets: np.ndarray, persons: np.ndarray, gate_mm: float) -> np.ndarray:
+    """``(Q,)`` which ``persons (Q, J, 3)`` lie within ``gate_mm`` (mean joint distance, 1 mm more for float32
+    rounding) of one of ``targets (K, J, 3)`` (``Tracker.unsure_targets``): the persons of unsure boxes that may
+    continue a track."""
+    persons = np.asarray(persons, float).reshape(-1, NUM_JOINTS, 3)
+    if not len(targets) or not len(persons):
+        return np.zeros(len(persons), bool)
+    return (mean_joint_distance(np.asarray(targets, float), persons) <= gate_mm + 1.0).any(0)
+
+
 def skeleton_height(joints: np.ndarray, up: np.ndarray) -> np.ndarray:
     """``(...)`` mm the skeletons ``(..., J, 3)`` span along the direction ``up (3,)`` (any length)."""
     h = joints @ (np.asarray(up, float) / np.linalg.norm(up))  # (..., J)
@@ -417,30 +427,44 @@ class Tracker:
         within: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> bool:
         """Whether :meth:`update` at ``timestamp_s`` could give a person the detector was unsure of a track, when
-        the frame's sure persons are ``joints (P, J, 3)`` / ``spread (P, J)``: whether a confirmed track is left
-        that none of them takes (the first pass of :meth:`update`, on the predicted joints; the tracker does not
-        change) and, given ``within`` (per joint the box ``(lo (J, 3), hi (J, 3))`` that every unsure person's
-        joints lie in, ``BoxHeatmaps.joint_bounds``), that the box comes within ``unsure_gate_mm`` of it (the mean
-        over joints of each joint's distance to its box is a lower bound of the distance to any unsure person).
-        When it is False, unsure persons change nothing, so a caller may skip finding them."""
+        the frame's sure persons are ``joints (P, J, 3)`` / ``spread (P, J)``: whether :meth:`unsure_targets`
+        leaves any. When it is False, unsure persons change nothing, so a caller may skip finding them."""
+        return len(self.unsure_targets(joints, spread, timestamp_s, up, within)) > 0
+
+    def unsure_targets(
+        self,
+        joints: np.ndarray,
+        spread: np.ndarray,
+        timestamp_s: float,
+        up: np.ndarray | None = None,
+        within: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> np.ndarray:
+        """``(K, J, 3)`` the predicted joints of the tracks that a person the detector was unsure of could continue
+        in :meth:`update` at ``timestamp_s``, when the frame's sure persons are ``joints (P, J, 3)`` / ``spread (P,
+        J)``: the confirmed tracks that none of them takes (the first pass of :meth:`update`, on the predicted
+        joints; the tracker does not change) and, given ``within`` (per joint the box ``(lo (J, 3), hi (J, 3))``
+        that every unsure person's joints lie in, ``BoxHeatmaps.joint_bounds``), that come within
+        ``unsure_gate_mm`` of it (the mean over joints of each joint's distance to its box is a lower bound of the
+        distance to any unsure person). An unsure person further than the gate from all of them (:func:`reaching`)
+        changes nothing: it never starts a track."""
         c = self.config
         confirmed = self.ids >= 0
         if c.unsure_gate_mm is None or not confirmed.any():
-            return False
-        if self.time is not None and not timestamp_s > self.time:
-            return True  # update will refuse the frame; nothing to save
+            return np.zeros((0, NUM_JOINTS, 3))
         pos = self._moved(timestamp_s - self.time)[1]  # where update will predict the tracks
+        if not timestamp_s > self.time:
+            return pos[confirmed]  # update will refuse the frame; nothing to save
         if within is not None:  # first the tracks the unsure persons could reach at all: often none
             lo, hi = (np.asarray(b, float) for b in within)
             nearest = np.clip(pos[confirmed], lo, hi)  # (T', J, 3): each joint's nearest point of its box
             bound = np.linalg.norm(pos[confirmed] - nearest, axis=-1).mean(-1)  # (T',) mm
             confirmed[confirmed] = bound <= c.unsure_gate_mm + 1.0  # 1 mm for the persons' float32 rounding
             if not confirmed.any():
-                return False
+                return np.zeros((0, NUM_JOINTS, 3))
         joints, spread = self._persons(joints, spread)
         usable = self._usable(joints, *self._measures(joints, spread, up))
         track_of = self._claims(mean_joint_distance(pos, joints), usable)
-        return bool((confirmed & ~np.isin(np.arange(self.num_tracks), track_of)).any())
+        return pos[confirmed & ~np.isin(np.arange(self.num_tracks), track_of)]
 
     def update(
         self,

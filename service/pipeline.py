@@ -18,6 +18,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,7 @@ from posenet.data.sample import Sample
 from posenet.evaluate import prediction_record
 from posenet.lifting import JointEstimate
 from posenet.scene import Scene, SceneView, views_of
+from posenet.track import reaching
 
 
 @dataclass
@@ -124,6 +126,18 @@ class SceneResult:
 
 def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
+
+
+@dataclass
+class TrackerQuestions:
+    """What a stream's tracker tells :meth:`ScenePipeline.run` about the persons of boxes the detector was unsure
+    of, so that only those it can use are found (``posenet.track.Tracker.unsure_targets``)."""
+
+    # (joints (P, J, 3), spreads (P, J) of the frame's persons, the box the unsure persons lie in) -> (K, J, 3):
+    # the predicted joints of the tracks a person of unsure boxes could continue; none: they are not looked for
+    targets: Callable
+    # how near one of them (mean joint distance) such a person must lie (posenet.track.reaching)
+    gate_mm: float
 
 
 def fused(heat, matched: list, unsure: list, boxes: list[np.ndarray], sure=None) -> JointEstimate:
@@ -278,7 +292,7 @@ class ScenePipeline:
         views: list[SceneView],
         boxes: list[np.ndarray] | None = None,
         person_ids: list[np.ndarray] | None = None,
-        unsure: bool | Callable[[np.ndarray, np.ndarray], bool] = False,
+        unsure: bool | Callable | TrackerQuestions = False,
     ) -> SceneResult:
         """Estimate every person's 3D pose in one frame.
 
@@ -292,7 +306,8 @@ class ScenePipeline:
                 (joints (P, J, 3) mm, spreads (P, J) mm) and of the box their joints would lie in (per joint ``(lo
                 (J, 3), hi (J, 3))``, ``BoxHeatmaps.joint_bounds`` of the unsure boxes left over, or None) lists
                 them only when it says so (a stream asks its tracker: ``posenet.track.Tracker.needs_unsure``), and
-                skips finding them otherwise.
+                skips finding them otherwise; :class:`TrackerQuestions` says where the tracks they could
+                continue are, so that only those persons are found (the others are left out before step 7).
         """
         if not views:
             raise ValueError("a scene needs at least one view")
@@ -340,14 +355,27 @@ class ScenePipeline:
         unsure_ms = 0.0
         if left is not None:  # unsure boxes no person took: their persons, for a tracker (when it asks)
             t1, fuse_ms = time.perf_counter(), 0.0
-            if callable(unsure):  # the fusion is the pose stage's work, asked or not: made once, counted there
+            reaches, go = None, True  # asked nothing: every person of unsure boxes is found
+            if callable(unsure) or isinstance(unsure, TrackerQuestions):
+                # the frame's own persons as they will be answered (those with points), for the question; their
+                # fusion is the pose stage's work, asked or not: made once, counted there
                 t2 = time.perf_counter()
                 sure = heat.estimate(members_of(matched, boxes))
                 fuse_ms = _ms(t2)
-            if not callable(unsure) or self._asks(unsure, heat, sure, left):
+                has = np.asarray(sure.has_points, dtype=bool)
+                joints, spread = (np.asarray(x, np.float64)[has] for x in (sure.joints, sure.spread_mm))
+                within = heat.joint_bounds(np.concatenate(left))
+                if isinstance(
+                    unsure, TrackerQuestions
+                ):  # the tracks they could continue: who is worth finding
+                    targets = unsure.targets(joints, spread, within)
+                    reaches, go = partial(reaching, targets, gate_mm=unsure.gate_mm), len(targets) > 0
+                else:
+                    go = unsure(joints, spread, within)
+            if go:
                 unsure_groups = group_unsure(
                     heat, views, boxes, all_matched, candidate,
-                    self._skeleton_config(), self.config.max_match_combinations, centres,
+                    self._skeleton_config(), self.config.max_match_combinations, centres, reaches,
                 )  # fmt: skip
             unsure_ms = _ms(t1) - fuse_ms
             timings["match"] += unsure_ms
@@ -431,17 +459,6 @@ class ScenePipeline:
         if not use_low:
             return boxes, scores, None
         return split_unsure(boxes, scores, threshold)
-
-    @staticmethod
-    def _asks(unsure, heat, sure, left) -> bool:
-        """``run``'s ``unsure`` function asked about the frame's persons as they will be answered (``sure``, their
-        fusion; those with points) and the box the leftover unsure boxes' persons would lie in."""
-        has = np.asarray(sure.has_points, dtype=bool)
-        return unsure(
-            np.asarray(sure.joints, np.float64)[has],
-            np.asarray(sure.spread_mm, np.float64)[has],
-            heat.joint_bounds(np.concatenate(left)),
-        )
 
     def _skeleton_config(self) -> SkeletonMatchConfig:
         """The skeleton matcher's thresholds (``skeletons-greedy``: its greedy rule)."""

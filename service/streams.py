@@ -44,7 +44,7 @@ from posenet.rig.check import floor_of_frame
 from posenet.skeleton import JOINTS
 from posenet.track import Tracker
 from service.errors import InputError
-from service.pipeline import SceneResult
+from service.pipeline import SceneResult, TrackerQuestions
 from service.response import scene_out, serialise
 from service.schemas import (
     SmoothedJoint,
@@ -286,7 +286,10 @@ class Frame:
         if not self.unsure:
             return False
         tracker, t, up = self.stream.tracker, self.time, self.up
-        return lambda joints, spread, within: tracker.needs_unsure(joints, spread, t, up, within)
+        return TrackerQuestions(
+            targets=lambda joints, spread, within: tracker.unsure_targets(joints, spread, t, up, within),
+            gate_mm=tracker.config.unsure_gate_mm or 0.0,
+        )
 
     def answer(
         self,

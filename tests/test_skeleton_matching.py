@@ -529,6 +529,18 @@ def test_unsure_boxes_left_over_are_grouped_for_a_tracker():
     unsure = group_unsure(MeanFusion(joints), views, boxes, persons, candidate)
     # B in both views; C, seen by view 0 only, lies in free space before view 1's wall with no box there: nobody
     assert [g.indices for g in unsure] == [(1, 1)]
+    # told which of the persons are worth finishing (a tracker's reach, from their fused joints), only those are
+    seen = []
+
+    def reaches(answer):
+        return lambda fused: seen.append(fused) or np.full(len(fused), answer)
+
+    heat = MeanFusion(joints)
+    kept = group_unsure(heat, views, boxes, persons, candidate, reaches=reaches(True))
+    assert [g.indices for g in kept] == [g.indices for g in unsure]
+    assert group_unsure(heat, views, boxes, persons, candidate, reaches=reaches(False)) == []
+    np.testing.assert_allclose(seen[0][0], B, atol=1e-3)  # asked with each person's fused joints (B, then C)
+    np.testing.assert_allclose(seen[0][1], C, atol=1e-3)
     # B's box in view 1 was admitted to a person: only view 0's B is left, and view 1 has a box over it
     taken = [Group((0, 0), np.zeros(3), 0.0), Group((-1, 1), np.zeros(3), 0.0)]
     assert [g.indices for g in group_unsure(MeanFusion(joints), views, boxes, taken, candidate)] == [(1, -1)]

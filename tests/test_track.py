@@ -13,6 +13,7 @@ from posenet.track import (
     bone_lengths,
     frame_scales,
     project_bones,
+    reaching,
     robust_prior,
     skeleton_height,
     torso_length,
@@ -106,13 +107,15 @@ def test_needs_unsure_says_when_unsure_persons_can_change_nothing():
     truth = trajectories(3, 90)
     rng = np.random.default_rng(1)
     spread1 = np.full(NUM_JOINTS, SPREAD_PER_NOISE * 30.0)
-    full, lazy, boxed = Tracker(), Tracker(), Tracker()
-    asked, asked_boxed = [], []
+    full, lazy, boxed, reach = Tracker(), Tracker(), Tracker(), Tracker()
+    asked, asked_boxed, reached, offered = [], [], [], []
     for f in range(90):
         sure = [k for k in range(3) if not (k == 1 and 30 <= f < 50) and not (k == 2 and f >= 70)]
         unsure = [k for k in range(3) if k not in sure and rng.random() < 0.8]  # unsure instead, mostly
         unsure += [0] if f % 7 == 0 else []  # and now and then an unsure double of person 0
         obs = truth[sure + unsure, f] + rng.normal(0, 30.0, (len(sure) + len(unsure), NUM_JOINTS, 3))
+        if f % 3 == 0:  # and an unsure person far from everyone (a shadow, a drape)
+            obs = np.concatenate([obs, truth[0, f][None] + [4000.0, 0.0, 0.0]])
         spread = np.tile(spread1, (len(obs), 1))
         mask = np.arange(len(obs)) >= len(sure)
         need = lazy.needs_unsure(obs[~mask], spread[~mask], f / FPS)
@@ -123,7 +126,22 @@ def test_needs_unsure_says_when_unsure_persons_can_change_nothing():
             obs[~mask], spread[~mask], f / FPS, within=within
         )
         asked_boxed.append(need_boxed)
+        # only the unsure persons reaches_unsure keeps (asked when needs_unsure says so, as a stream does)
+        keep = ~mask
+        targets = reach.unsure_targets(obs[~mask], spread[~mask], f / FPS)
+        if mask.any() and len(targets):
+            keep[mask] = reaching(targets, obs[mask], reach.config.unsure_gate_mm)
+            offered.append(int(mask.sum()))
+        reached.append(int(keep[mask].sum()))
         a = full.update(obs, spread, f / FPS, mask)
+        r = reach.update(obs[keep], spread[keep], f / FPS, mask[keep])
+        by_person = {p: t for p, t in zip(np.flatnonzero(keep), r, strict=True)}
+        for p, person in enumerate(a):  # an unsure person left out is one that no track took
+            if p in by_person:
+                assert by_person[p].track_id == person.track_id, f
+                np.testing.assert_array_equal(by_person[p].joints, person.joints)
+            else:
+                assert person.track_id is None, f
         for tracker, ask in ((lazy, need), (boxed, need_boxed)):
             b = tracker.update(obs if ask else obs[~mask], spread if ask else spread[~mask], f / FPS,
                                mask if ask else None)  # fmt: skip
@@ -135,6 +153,7 @@ def test_needs_unsure_says_when_unsure_persons_can_change_nothing():
             )
     assert any(asked) and not all(asked), asked
     assert any(asked_boxed) and sum(asked_boxed) < sum(asked), (asked_boxed, asked)
+    assert 0 < sum(reached) < sum(offered), (reached, offered)  # of those asked for, it keeps some, not all
 
 
 def test_an_unsure_person_continues_a_track_but_never_starts_one():
