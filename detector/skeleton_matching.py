@@ -403,7 +403,7 @@ def group_unsure(
     module docstring. They are grouped as the sure boxes are (steps 1-4) and dropped where another view should
     have seen them (step 7); fuse them with ``heat.estimate(members_of(unsure, boxes))``. ``centres``: as
     :func:`match_heatmaps`'. ``reaches``: a function of their fused joints ``(Q, J, 3)`` giving ``(Q,)`` bool, the
-    persons worth finishing (a tracker's ``Tracker.reaches_unsure``); the others are left out before step 7,
+    persons worth finishing (those a tracker could use: ``posenet.track.reaching``); the others are left out before step 7,
     which costs most (each person's other views checked one by one).
 
     They are no person of the frame on their own: a tracker may take one to continue a track it already has."""

@@ -418,19 +418,6 @@ class Tracker:
             track_of[cols[ok]] = rows[ok]
         return track_of
 
-    def needs_unsure(
-        self,
-        joints: np.ndarray,
-        spread: np.ndarray,
-        timestamp_s: float,
-        up: np.ndarray | None = None,
-        within: tuple[np.ndarray, np.ndarray] | None = None,
-    ) -> bool:
-        """Whether :meth:`update` at ``timestamp_s`` could give a person the detector was unsure of a track, when
-        the frame's sure persons are ``joints (P, J, 3)`` / ``spread (P, J)``: whether :meth:`unsure_targets`
-        leaves any. When it is False, unsure persons change nothing, so a caller may skip finding them."""
-        return len(self.unsure_targets(joints, spread, timestamp_s, up, within)) > 0
-
     def unsure_targets(
         self,
         joints: np.ndarray,
@@ -446,7 +433,7 @@ class Tracker:
         that every unsure person's joints lie in, ``BoxHeatmaps.joint_bounds``), that come within
         ``unsure_gate_mm`` of it (the mean over joints of each joint's distance to its box is a lower bound of the
         distance to any unsure person). An unsure person further than the gate from all of them (:func:`reaching`)
-        changes nothing: it never starts a track."""
+        changes nothing: it never starts a track; with none left, a caller may skip finding unsure persons."""
         c = self.config
         confirmed = self.ids >= 0
         if c.unsure_gate_mm is None or not confirmed.any():

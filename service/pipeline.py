@@ -305,9 +305,9 @@ class ScenePipeline:
                 for a tracker: they are no persons of the frame on their own. A function of the frame's persons
                 (joints (P, J, 3) mm, spreads (P, J) mm) and of the box their joints would lie in (per joint ``(lo
                 (J, 3), hi (J, 3))``, ``BoxHeatmaps.joint_bounds`` of the unsure boxes left over, or None) lists
-                them only when it says so (a stream asks its tracker: ``posenet.track.Tracker.needs_unsure``), and
-                skips finding them otherwise; :class:`TrackerQuestions` says where the tracks they could
-                continue are, so that only those persons are found (the others are left out before step 7).
+                them only when it says so, and skips finding them otherwise. :class:`TrackerQuestions` (a stream's)
+                says instead where the tracks are that they could continue: none, and they are not looked for;
+                else only those within reach of one are finished (the others are left out before step 7).
         """
         if not views:
             raise ValueError("a scene needs at least one view")

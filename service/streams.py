@@ -278,7 +278,7 @@ class Frame:
         """The frame's work before its pipeline runs, in the pipeline's worker thread (``service.routes.
         scene_result``): the room's up (the scene's, else the floor's, :func:`find_up`), and what to tell
         ``ScenePipeline.run`` about the unsure persons: list them only when the stream's tracker could give one
-        a track (``Tracker.needs_unsure`` on the frame's sure persons), which it rarely can; finding them costs
+        a track (``Tracker.unsure_targets`` on the frame's sure persons), which it rarely can; finding them costs
         a few ms. The stream is only read here (its lock is held; it changes in :meth:`answer`)."""
         self.up = scene.up
         if self.up is None and self.floor_up:

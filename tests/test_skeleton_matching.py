@@ -405,7 +405,7 @@ def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny
         assert all(s is None or s < threshold for s in p.scores)
         assert not taken & {(v, k) for v, ks in enumerate(p.box_indices) for k in ks}
     assert len(both.persons) > n, "the test frame should give a person of unsure boxes alone"
-    # asked through a function of the frame's persons (a stream's Tracker.needs_unsure): it sees them as they are
+    # asked through a function of the frame's persons (as a stream's Tracker.unsure_targets answers): it sees them as they are
     # answered, and its answer decides whether the unsure ones are found at all
     seen = []
 

@@ -99,9 +99,9 @@ def test_a_one_frame_ghost_and_a_duplicate_never_get_an_id():
     assert tracker.next_id == 1
 
 
-def test_needs_unsure_says_when_unsure_persons_can_change_nothing():
-    """Tracker.needs_unsure (a stream skips finding the unsure persons when it is False): two trackers in lockstep,
-    one always given the frame's unsure persons, the other only when needs_unsure asks for them, answer the same
+def test_unsure_targets_say_when_unsure_persons_can_change_nothing():
+    """Tracker.unsure_targets (a stream skips finding the unsure persons when there are none): trackers in lockstep,
+    one always given the frame's unsure persons, the others only when unsure_targets asks for them, answer the same
     tracks and joints frame by frame, over persons who come and go, turn unsure, and leave unsure doubles behind;
     and it does ask in some frames and not in others."""
     truth = trajectories(3, 90)
@@ -118,15 +118,16 @@ def test_needs_unsure_says_when_unsure_persons_can_change_nothing():
             obs = np.concatenate([obs, truth[0, f][None] + [4000.0, 0.0, 0.0]])
         spread = np.tile(spread1, (len(obs), 1))
         mask = np.arange(len(obs)) >= len(sure)
-        need = lazy.needs_unsure(obs[~mask], spread[~mask], f / FPS)
+        need = len(lazy.unsure_targets(obs[~mask], spread[~mask], f / FPS)) > 0
         asked.append(need)
         # told where the unsure persons' joints lie (a box around them, as BoxHeatmaps.joint_bounds gives)
         within = (obs[mask].min(0), obs[mask].max(0)) if mask.any() else None
-        need_boxed = within is not None and boxed.needs_unsure(
-            obs[~mask], spread[~mask], f / FPS, within=within
+        need_boxed = (
+            within is not None
+            and len(boxed.unsure_targets(obs[~mask], spread[~mask], f / FPS, within=within)) > 0
         )
         asked_boxed.append(need_boxed)
-        # only the unsure persons reaches_unsure keeps (asked when needs_unsure says so, as a stream does)
+        # only the unsure persons within reach of those targets (posenet.track.reaching, as a stream finds them)
         keep = ~mask
         targets = reach.unsure_targets(obs[~mask], spread[~mask], f / FPS)
         if mask.any() and len(targets):
