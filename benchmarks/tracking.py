@@ -99,12 +99,7 @@ def stream_cost(data: Path, gt: dict, backend: str, threads: int | None) -> dict
         tracker, unsure_ms, update_ms = Tracker(), [], []
         for frame_id, frame in tqdm(rows, desc=f"sequence {seq}", unit="frame"):
             t = frame.timestamp_s
-            questions = TrackerQuestions(  # as a stream asks its tracker (service.streams.Frame.prepare)
-                targets=lambda j, s, within, t=t, tracker=tracker: tracker.unsure_targets(
-                    j, s, t, up, within
-                ),
-                gate_mm=tracker.config.unsure_gate_mm or 0.0,
-            )
+            questions = TrackerQuestions.asking(tracker, t, up)  # as a stream asks (streams.Frame.prepare)
             result = pipe.run(views_of(ds[index[frame_id]]), unsure=questions)
             joints = np.array([p.joints for p in result.persons], float).reshape(-1, 10, 3)
             spread = np.array([p.spread_mm for p in result.persons], float).reshape(-1, 10)

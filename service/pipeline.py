@@ -139,6 +139,17 @@ class TrackerQuestions:
     # how near one of them (mean joint distance) such a person must lie (posenet.track.reaching)
     gate_mm: float
 
+    @classmethod
+    def asking(cls, tracker, timestamp_s: float, up: np.ndarray | None) -> TrackerQuestions:
+        """The questions of ``tracker`` (a ``posenet.track.Tracker``) about its frame at ``timestamp_s``, whose
+        room's up is ``up``, as a stream asks them."""
+        return cls(
+            targets=lambda joints, spread, within: tracker.unsure_targets(
+                joints, spread, timestamp_s, up, within
+            ),
+            gate_mm=tracker.config.unsure_gate_mm or 0.0,
+        )
+
 
 def fused(heat, matched: list, unsure: list, boxes: list[np.ndarray], sure=None) -> JointEstimate:
     """``heat.estimate`` of the persons ``matched + unsure`` (``detector.matching.Group`` s of ``boxes``); with
@@ -292,7 +303,7 @@ class ScenePipeline:
         views: list[SceneView],
         boxes: list[np.ndarray] | None = None,
         person_ids: list[np.ndarray] | None = None,
-        unsure: bool | Callable | TrackerQuestions = False,
+        unsure: bool | TrackerQuestions = False,
     ) -> SceneResult:
         """Estimate every person's 3D pose in one frame.
 
@@ -302,12 +313,11 @@ class ScenePipeline:
             person_ids: per view (K_v,) identities of the reference boxes; None groups them with the matcher.
             unsure: also list, after the frame's persons, those of boxes the detector was unsure of in every
                 view (``PersonResult.unsure``; detector mode with the skeleton matcher and unsure boxes on),
-                for a tracker: they are no persons of the frame on their own. A function of the frame's persons
-                (joints (P, J, 3) mm, spreads (P, J) mm) and of the box their joints would lie in (per joint ``(lo
-                (J, 3), hi (J, 3))``, ``BoxHeatmaps.joint_bounds`` of the unsure boxes left over, or None) lists
-                them only when it says so, and skips finding them otherwise. :class:`TrackerQuestions` (a stream's)
-                says instead where the tracks are that they could continue: none, and they are not looked for;
-                else only those within reach of one are finished (the others are left out before step 7).
+                for a tracker: they are no persons of the frame on their own. :class:`TrackerQuestions` (a
+                stream's) asks its tracker first, told the frame's persons as they will be answered and the box
+                their joints would lie in (``BoxHeatmaps.joint_bounds`` of the unsure boxes left over), where the
+                tracks are that they could continue: none, and they are not looked for; else only those within
+                reach of one are finished (the others are left out before step 7).
         """
         if not views:
             raise ValueError("a scene needs at least one view")
@@ -356,7 +366,7 @@ class ScenePipeline:
         if left is not None:  # unsure boxes no person took: their persons, for a tracker (when it asks)
             t1, fuse_ms = time.perf_counter(), 0.0
             reaches, go = None, True  # asked nothing: every person of unsure boxes is found
-            if callable(unsure) or isinstance(unsure, TrackerQuestions):
+            if isinstance(unsure, TrackerQuestions):
                 # the frame's own persons as they will be answered (those with points), for the question; their
                 # fusion is the pose stage's work, asked or not: made once, counted there
                 t2 = time.perf_counter()
@@ -364,14 +374,9 @@ class ScenePipeline:
                 fuse_ms = _ms(t2)
                 has = np.asarray(sure.has_points, dtype=bool)
                 joints, spread = (np.asarray(x, np.float64)[has] for x in (sure.joints, sure.spread_mm))
-                within = heat.joint_bounds(np.concatenate(left))
-                if isinstance(
-                    unsure, TrackerQuestions
-                ):  # the tracks they could continue: who is worth finding
-                    targets = unsure.targets(joints, spread, within)
-                    reaches, go = partial(reaching, targets, gate_mm=unsure.gate_mm), len(targets) > 0
-                else:
-                    go = unsure(joints, spread, within)
+                # the tracks they could continue: whether any is worth finding, and which
+                targets = unsure.targets(joints, spread, heat.joint_bounds(np.concatenate(left)))
+                reaches, go = partial(reaching, targets, gate_mm=unsure.gate_mm), len(targets) > 0
             if go:
                 unsure_groups = group_unsure(
                     heat, views, boxes, all_matched, candidate,

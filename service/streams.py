@@ -285,11 +285,7 @@ class Frame:
             self.up, self.look, self.floor_ms = find_up(self.stream, scene)
         if not self.unsure:
             return False
-        tracker, t, up = self.stream.tracker, self.time, self.up
-        return TrackerQuestions(
-            targets=lambda joints, spread, within: tracker.unsure_targets(joints, spread, t, up, within),
-            gate_mm=tracker.config.unsure_gate_mm or 0.0,
-        )
+        return TrackerQuestions.asking(self.stream.tracker, self.time, self.up)
 
     def answer(
         self,

@@ -405,12 +405,19 @@ def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny
         assert all(s is None or s < threshold for s in p.scores)
         assert not taken & {(v, k) for v, ks in enumerate(p.box_indices) for k in ks}
     assert len(both.persons) > n, "the test frame should give a person of unsure boxes alone"
-    # asked through a function of the frame's persons (as a stream's Tracker.unsure_targets answers): it sees them as they are
-    # answered, and its answer decides whether the unsure ones are found at all
+    # asked through a tracker's questions (TrackerQuestions, as a stream asks Tracker.unsure_targets): they see the
+    # frame's persons as they are answered, and the answer (a track within reach of all, or none) decides whether
+    # the unsure ones are found at all
+    from service.pipeline import TrackerQuestions
+
     seen = []
 
     def ask(answer):
-        return lambda joints, spread, within: seen.append((joints, spread, within)) or answer
+        targets = np.zeros((int(answer), 10, 3))  # one track, or none
+        return TrackerQuestions(
+            targets=lambda joints, spread, within: seen.append((joints, spread, within)) or targets,
+            gate_mm=np.inf,  # within reach of every person
+        )
 
     yes, no = low.run(views, unsure=ask(True)), low.run(views, unsure=ask(False))
     np.testing.assert_array_equal(seen[0][0], np.array([p.joints for p in result.persons]).reshape(-1, 10, 3))
