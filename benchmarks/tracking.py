@@ -263,6 +263,10 @@ def main(argv: list[str] | None = None) -> dict:
         current = getattr(config, key)
         if value.lower() == "none":
             setattr(config, key, None)
+        elif isinstance(current, bool):
+            if value.lower() not in ("true", "false"):
+                p.error(f"--set {item}: {key} takes true or false")
+            setattr(config, key, value.lower() == "true")
         else:  # a field that is None by default takes a number
             setattr(config, key, float(value) if current is None else type(current)(value))
     report = {"machine": machine_line(), "date": time.strftime("%Y-%m-%d"), "tracker": vars(config).copy()}

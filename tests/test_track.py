@@ -10,6 +10,9 @@ from posenet.skeleton import BONE_TEMPLATE_MM, JOINT_INDEX, NUM_JOINTS
 from posenet.track import (
     Tracker,
     TrackerConfig,
+    _middle,
+    _norm,
+    _taken,
     bone_lengths,
     frame_scales,
     project_bones,
@@ -97,6 +100,24 @@ def test_a_one_frame_ghost_and_a_duplicate_never_get_an_id():
         out = tracker.update(np.array(obs), np.full((len(obs), NUM_JOINTS), 30.0), f / FPS)
         assert [p.track_id for p in out][1:] in ([], [None])
     assert tracker.next_id == 1
+
+
+@pytest.mark.parametrize("apart", [True, False])
+def test_a_person_split_in_two_from_the_first_frame_gets_one_track(apart):
+    """A person the matcher splits into two persons 15 cm apart from the first frame on starts one track (the
+    person with the lower spread), unless births_apart is off, when both become tracks (the rule's ablation)."""
+    tracker = Tracker(TrackerConfig(births_apart=apart))
+    truth = trajectories(2, 20)
+    for f in range(20):
+        obs = np.stack([truth[0, f] + [150.0, 0, 0], truth[0, f], truth[1, f]])
+        spread = np.full((3, NUM_JOINTS), 60.0)
+        spread[1] = 30.0  # the better half comes second: the spread orders, not the input
+        out = tracker.update(obs, spread, f / FPS)
+    ids = [p.track_id for p in out]
+    if apart:
+        assert ids[0] is None and None not in ids[1:] and tracker.next_id == 2
+    else:
+        assert None not in ids and tracker.next_id == 3
 
 
 def test_unsure_targets_say_when_unsure_persons_can_change_nothing():
@@ -437,3 +458,17 @@ def test_births_list_each_track_s_first_frames(monkeypatch):
     assert off[0]["first_height_mm"] > 500 > 200 > off[1]["first_height_mm"] and off[0]["frames"] == 8
     on = births(frames, Tracker(TrackerConfig(min_height_mm=0)))
     assert [b["near_share"] for b in on] == [1.0]
+
+
+def test_lean_helpers_equal_numpy():
+    """The tracker's lean median, norm and taken-mask give numpy's values exactly (they only skip its checks)."""
+    rng = np.random.default_rng(3)
+    for shape in [(7, 10), (4, 9), (0, 10), (5, 3, 2), (2, 1, 2)]:
+        x = rng.normal(size=shape) * 100
+        if x.size > 6:
+            x.reshape(-1)[[0, 5]] = np.nan  # a NaN makes its slice's median NaN, as numpy's
+        assert np.array_equal(_middle(x, 1), np.median(x, axis=1), equal_nan=True)
+    x = rng.normal(size=(6, 10, 3)) * 100
+    assert np.array_equal(_norm(x), np.linalg.norm(x, axis=-1))
+    for track_of, n in [(np.array([2, -1, 0]), 4), (np.array([], int), 3), (np.array([-1, -1]), 0)]:
+        assert np.array_equal(_taken(track_of, n), np.isin(np.arange(n), track_of))
