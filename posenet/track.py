@@ -18,7 +18,9 @@ Each frame's persons (3D skeletons ``(P, J, 3)`` in mm, reference frame, with th
    seen again, and continues nothing. A person half behind a monitor, boxed with a score of 0.3, keeps their
    track.
 2. **Hysteresis.** A person that no track takes starts a *tentative* track, unless it lies within
-   ``duplicate_mm`` of a track already seen in this frame (a second detection of the same person). A tentative
+   ``duplicate_mm`` of a track already seen in this frame (a second detection of the same person), or of another
+   person starting one in this frame (one person that the matcher split: the one with the lower spread starts
+   it; ``births_apart``). A tentative
    track is *confirmed*, and gets its id, after ``birth_hits`` consecutive frames, unless over those frames it looks
    like a person lying down under a drape (with the room's up: the medians of its skeleton's height along up below
    ``lying_height_mm`` and of its joints' spread above ``lying_spread_mm``); such a track stays tentative and is
