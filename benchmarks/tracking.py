@@ -118,6 +118,30 @@ def stream_cost(data: Path, gt: dict, backend: str, threads: int | None) -> dict
     return out
 
 
+def tracker_config(overrides: list[str]) -> TrackerConfig:
+    """The default :class:`TrackerConfig` with ``--set`` overrides ``KEY=VALUE``: ``none`` for None, ``true`` /
+    ``false`` for a flag, else a number of the field's type (a field that is None by default takes a float).
+    ValueError names a field that does not exist or a value it cannot take."""
+    config = TrackerConfig()
+    for item in overrides:
+        key, _, value = item.partition("=")
+        if not hasattr(config, key):
+            raise ValueError(f"--set {item}: TrackerConfig has no field {key!r}")
+        current = getattr(config, key)
+        if value.lower() == "none":
+            setattr(config, key, None)
+        elif isinstance(current, bool):
+            if value.lower() not in ("true", "false"):
+                raise ValueError(f"--set {item}: {key} takes true or false")
+            setattr(config, key, value.lower() == "true")
+        else:
+            try:
+                setattr(config, key, float(value) if current is None else type(current)(value))
+            except ValueError:
+                raise ValueError(f"--set {item}: {key} takes a number") from None
+    return config
+
+
 def sequences(
     gt: dict, detections: dict[str, dict] | None = None
 ) -> dict[int, list[tuple[str, SequenceFrame]]]:
@@ -255,20 +279,10 @@ def main(argv: list[str] | None = None) -> dict:
                    help="override a TrackerConfig field (offline tracking), e.g. --set max_spread_mm=500")  # fmt: skip
     args = p.parse_args(argv)
     gt = load_annotations(args.annotations or args.data / "annotations.json")
-    config = TrackerConfig()
-    for item in args.set:
-        key, _, value = item.partition("=")
-        if not hasattr(config, key):
-            p.error(f"--set {item}: TrackerConfig has no field {key!r}")
-        current = getattr(config, key)
-        if value.lower() == "none":
-            setattr(config, key, None)
-        elif isinstance(current, bool):
-            if value.lower() not in ("true", "false"):
-                p.error(f"--set {item}: {key} takes true or false")
-            setattr(config, key, value.lower() == "true")
-        else:  # a field that is None by default takes a number
-            setattr(config, key, float(value) if current is None else type(current)(value))
+    try:
+        config = tracker_config(args.set)
+    except ValueError as err:
+        p.error(str(err))
     report = {"machine": machine_line(), "date": time.strftime("%Y-%m-%d"), "tracker": vars(config).copy()}
     report["sequences"] = {}
     if args.cost:

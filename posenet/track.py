@@ -187,8 +187,8 @@ def _norm(x: np.ndarray) -> np.ndarray:
 
 
 def _middle(x: np.ndarray, axis: int = -1) -> np.ndarray:
-    """``np.median(x, axis)`` of ``x`` without NaN, the same values (the two middle ones averaged for an even
-    count) without its partition's overhead on small arrays. Where a slice holds a NaN, NaN (as np.median)."""
+    """``np.median(x, axis)``, the same values (the two middle ones averaged for an even count; NaN where a slice
+    holds a NaN) without its partition's overhead on small arrays."""
     s = np.sort(x, axis=axis)
     n = s.shape[axis]
     lo, hi = np.take(s, (n - 1) // 2, axis=axis), np.take(s, n // 2, axis=axis)

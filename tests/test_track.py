@@ -472,3 +472,22 @@ def test_lean_helpers_equal_numpy():
     assert np.array_equal(_norm(x), np.linalg.norm(x, axis=-1))
     for track_of, n in [(np.array([2, -1, 0]), 4), (np.array([], int), 3), (np.array([-1, -1]), 0)]:
         assert np.array_equal(_taken(track_of, n), np.isin(np.arange(n), track_of))
+
+
+def test_tracking_set_overrides_parse_flags_numbers_and_none(monkeypatch):
+    """benchmarks/tracking.py --set: a flag takes true or false (not any non-empty string), numbers keep their
+    field's type, none clears a field; an unknown field or a bad value is a clear error."""
+    import sys
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    sys.modules.pop("tracking", None)
+    from tracking import tracker_config
+
+    c = tracker_config(["births_apart=false", "birth_hits=4", "gate_mm=350", "unsure_gate_mm=none"])
+    assert c.births_apart is False and c.birth_hits == 4 and c.gate_mm == 350.0 and c.unsure_gate_mm is None
+    assert tracker_config(["births_apart=True"]).births_apart is True
+    assert tracker_config([]) == TrackerConfig()
+    for bad in (["births_apart=0"], ["no_such=1"], ["gate_mm=wide"]):
+        with pytest.raises(ValueError, match="--set"):
+            tracker_config(bad)
