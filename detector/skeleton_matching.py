@@ -262,11 +262,11 @@ def match_skeletons(
         several boxes, ``indices`` names the first and ``extra`` the others.
     """
     if centres is None:
-        centres, view = box_centres_3d(boxes, depths, cameras)
-    else:
-        view = np.repeat(np.arange(len(boxes)), [len(np.asarray(b).reshape(-1, 4)) for b in boxes])
+        centres = box_centres_3d(boxes, depths, cameras)[0]
     V = len(boxes)
-    local = np.arange(len(view)) - box_starts(boxes)[view]
+    starts = box_starts(boxes)  # (V + 1,)
+    view = np.repeat(np.arange(V), np.diff(starts))  # (N,) each box's view
+    local = np.arange(len(view)) - starts[view]
     groups = []
     for members, mean in group_skeletons(view, joints, ok, centres, V, config, max_combinations):
         indices = np.full(V, -1)
