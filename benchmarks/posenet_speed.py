@@ -4,7 +4,7 @@ Usage::
 
     nice python benchmarks/posenet_speed.py --threads 2 [--json OUT.json]
 
-For each preset (``cpu``: 96x96 person crops, U-Net base 16; ``paper``: full 320x240 images, base 64) and each
+For each preset (``cpu``: 96x96 person crops, U-Net base 16; ``cpu-wide``: the same at base 24; ``paper``: full 320x240 images, base 64) and each
 execution setting (fp32 / bf16 autocast x contiguous / channels_last; ``auto``: the precision this machine gets,
 channels_last, as the service and training run by default; ``onnxruntime`` / ``openvino``: the U-Net on an
 inference runtime, inference only), it times on random 3-view scenes of
@@ -37,6 +37,8 @@ from posenet.runtime import installed
 
 PRESETS = {
     "cpu": dict(inputs=InputConfig(mode="crop", crop_size=96, extra_depth=True), base=16, depth=3),
+    # the cpu preset widened (posenet.train --base 24 --init a base-16 checkpoint; docs/RESULTS.md, session 23)
+    "cpu-wide": dict(inputs=InputConfig(mode="crop", crop_size=96, extra_depth=True), base=24, depth=3),
     "paper": dict(inputs=InputConfig(mode="full", extra_depth=False), base=64, depth=4),
 }
 SETTINGS = {  # name: (precision, channels_last, backend)

@@ -45,6 +45,7 @@ from posenet.loss import mpjpe, reprojection_2d
 from posenet.model import ModelConfig, PoseNet
 from posenet.scene import Scene
 from posenet.schedule import Schedule, lr_factor  # noqa: F401  (lr_factor: posenet.train's public name)
+from posenet.unet import UNetConfig, widen_state_dict
 
 
 @dataclass
@@ -261,10 +262,19 @@ def load_init_weights(model: PoseNet, path: str) -> None:
 
     from posenet.checkpoint import checkpoint_files
 
-    weights, _ = checkpoint_files(path)
+    weights, config = checkpoint_files(path)
     fix = "give the same --preset, --base, --depth, --modality and --extra-depth as the run that made it"
+    state = load_file(weights, device="cpu")
+    small = _narrower_unet(config, model)
+    if small is not None:  # --base above the checkpoint's: widen it, computing what it computed
+        state = widen_state_dict(state, small, model.unet, prefix="unet.")
+        print(
+            f"widened {path} from U-Net base {small.base} to {model.config.base}: the new channels start "
+            "disconnected (the network computes what the checkpoint computed) and training connects them",
+            file=sys.stderr,
+        )
     try:
-        missing, unexpected = model.load_state_dict(load_file(weights, device="cpu"), strict=False)
+        missing, unexpected = model.load_state_dict(state, strict=False)
     except RuntimeError as e:  # a tensor of another shape
         raise ValueError(
             f"--init {path} does not fit this run's model ({str(e).splitlines()[-1].strip()}): {fix}"
@@ -273,6 +283,27 @@ def load_init_weights(model: PoseNet, path: str) -> None:
         raise ValueError(
             f"--init {path} does not fit this run's model (missing {missing[:3]}, unexpected {unexpected[:3]}): {fix}"
         )
+
+
+def _narrower_unet(config_file: Path, model: PoseNet) -> UNetConfig | None:
+    """The U-Net config of the checkpoint whose config is ``config_file`` when it is ``model``'s but narrower
+    (a smaller ``base``, all else equal), else None."""
+    if not config_file.is_file():
+        return None
+    saved = json.loads(config_file.read_text()).get("model")
+    if not isinstance(saved, dict):
+        return None
+    try:
+        small = ModelConfig.from_dict(saved).unet
+    except (TypeError, ValueError):
+        return None
+    big = model.config.unet
+    same = (small.depth, small.in_channels, small.out_channels) == (
+        big.depth,
+        big.in_channels,
+        big.out_channels,
+    )
+    return small if same and small.base < big.base else None
 
 
 # ----------------------------------------------------------------------------- training
@@ -546,7 +577,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--extra-depth", action=argparse.BooleanOptionalAction, help="relative depth + valid channels"
     )
     g.add_argument("--crop-size", type=int, help="cpu preset: side of the person crop fed to the U-Net")
-    g.add_argument("--base", type=int, help="U-Net width (channels of its first level)")
+    g.add_argument(
+        "--base",
+        type=int,
+        help="U-Net width (channels of its first level); above an --init checkpoint's, its weights are widened "
+        "so that training starts from what it computes (the new channels start disconnected)",
+    )
     g.add_argument("--depth", type=int, help="U-Net downsamplings")
     g.add_argument(
         "--loss", choices=("3d", "2d"), help="3d: MPJPE through the cameras (paper); 2d: the baseline"

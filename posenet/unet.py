@@ -121,3 +121,70 @@ class UNet(nn.Module):
                 h.remove()
             self.train(was_training)
         return total
+
+
+def _convolutions(depth: int) -> dict:
+    """Each convolution of a U-Net of this depth (its key prefix) -> ``(level in, level out)``: a level's width
+    is ``base * 2**level``; ``"in"`` is the network's input, ``"joints"`` the heatmaps, ``("up", i)`` the
+    concatenation of the upsampled level i + 1 and the skip of level i."""
+    convs = {"stem.0": ("in", 0), "stem.3": (0, 0)}
+    for i in range(depth):
+        convs[f"downs.{i}.0"] = (i, i + 1)
+        convs[f"downs.{i}.3"] = (i + 1, i + 1)
+    for k, i in enumerate(reversed(range(depth))):
+        convs[f"ups.{k}.conv.0"] = (("up", i), i)
+        convs[f"ups.{k}.conv.3"] = (i, i)
+    convs["head"] = (0, "joints")
+    return convs
+
+
+def _width(level, cfg: UNetConfig) -> int:
+    if level == "in":
+        return cfg.in_channels
+    if level == "joints":
+        return cfg.out_channels
+    return cfg.base * 2**level
+
+
+def widen_state_dict(small_state: dict, small: UNetConfig, wide: UNet, prefix: str = "") -> dict:
+    """The weights of the wider U-Net ``wide`` that compute exactly what ``small_state`` (a U-Net of config
+    ``small``: the same depth and channels in and out, a smaller ``base``) computes.
+
+    Each of the small network's channels keeps its place (the first channels of its level) and its weights; the
+    new channels keep ``wide``'s fresh initialisation for what flows into them, but every weight from a new
+    channel into an old one (and into the head) is zero, and BatchNorm normalises per channel, so the old
+    channels, and the logits, are the small network's in training and in evaluation mode alike. Training then
+    connects the new channels (their outgoing weights get gradients at once): more capacity, started from what
+    the small network has learnt. ``prefix`` is the U-Net's key prefix in both state dicts (``"unet."`` in a
+    :class:`posenet.model.PoseNet`).
+    """
+    big = wide.config
+    if (big.depth, big.in_channels, big.out_channels) != (small.depth, small.in_channels, small.out_channels):
+        raise ValueError(f"widening keeps the depth and the channels in and out: got {small} -> {big}")
+    if big.base < small.base:
+        raise ValueError(f"cannot widen base {small.base} to a narrower {big.base}")
+    out = {prefix + k: v.clone() for k, v in wide.state_dict().items()}
+    if unknown := sorted(set(small_state) - set(out)):
+        raise ValueError(f"weights that a U-Net of depth {big.depth} does not have: {unknown[:3]}")
+    for conv, (level_in, level_out) in _convolutions(small.depth).items():
+        if isinstance(level_in, tuple):  # concatenation: [upsampled level i + 1, skip of level i]
+            i = level_in[1]
+            cols = torch.cat(
+                [torch.arange(_width(i + 1, small)), _width(i + 1, big) + torch.arange(_width(i, small))]
+            )
+        else:
+            cols = torch.arange(_width(level_in, small))
+        rows = _width(level_out, small)
+        w = out[f"{prefix}{conv}.weight"]
+        w[:rows] = 0  # the old channels take nothing from the new ones ...
+        w[:rows, cols] = small_state[f"{prefix}{conv}.weight"].to(
+            w.dtype
+        )  # ... and their own inputs as before
+        if f"{prefix}{conv}.bias" in small_state:
+            out[f"{prefix}{conv}.bias"][:rows] = small_state[f"{prefix}{conv}.bias"]
+        if conv != "head":  # the BatchNorm right after each convolution of a DoubleConv
+            bn = f"{prefix}{conv[:-1]}{int(conv[-1]) + 1}"
+            for name in ("weight", "bias", "running_mean", "running_var"):
+                out[f"{bn}.{name}"][:rows] = small_state[f"{bn}.{name}"]
+            out[f"{bn}.num_batches_tracked"] = small_state[f"{bn}.num_batches_tracked"].clone()
+    return out

@@ -192,7 +192,16 @@ def test_cli_init_starts_from_given_weights(tiny, tmp_path):
     assert train_main([*base, "--out", str(second), "--init", str(first / "last"), "--minutes", "0"]) == 0
     saved = json.loads((second / "config.json").read_text())
     assert saved["train"]["init"] == str(first / "last") == saved["trained_on"]["init"]
-    with pytest.raises(ValueError, match="does not fit"):
-        load_init_weights(
-            PoseNet(ModelConfig(inputs=InputConfig(crop_size=32), base=16)), str(first / "last")
-        )
+    for other in ({"base": 4}, {"base": 16, "depth": 2}):  # narrower, or another depth: no way to fit
+        with pytest.raises(ValueError, match="does not fit"):
+            load_init_weights(
+                PoseNet(ModelConfig(inputs=InputConfig(crop_size=32), **other)), str(first / "last")
+            )
+    # a wider --base: the checkpoint widened, computing the same logits in training and in evaluation mode
+    wide = PoseNet(ModelConfig(inputs=InputConfig(crop_size=32), base=12))
+    load_init_weights(wide, str(first / "last"))
+    x = torch.randn(3, model.config.unet.in_channels, 32, 32, generator=torch.Generator().manual_seed(0))
+    x = x.contiguous(memory_format=torch.channels_last)
+    for training in (False, True):
+        model.train(training), wide.train(training)
+        torch.testing.assert_close(wide.unet(x), model.unet(x), rtol=0, atol=1e-5)

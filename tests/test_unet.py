@@ -50,3 +50,29 @@ def test_flops_scale_with_area_and_keep_bn_state():
     assert f1 > 0 and f2 == 4 * f1
     torch.testing.assert_close(net.stem[1].running_mean, before)
     assert net.training
+
+
+def test_widening_computes_the_same_and_then_learns():
+    from posenet.unet import widen_state_dict
+
+    torch.manual_seed(0)
+    small_cfg, wide_cfg = (
+        UNetConfig(in_channels=5, base=4, depth=2),
+        UNetConfig(in_channels=5, base=6, depth=2),
+    )
+    small = UNet(small_cfg)
+    small(torch.randn(4, 5, 16, 16))  # BatchNorm statistics of its own, not the initial ones
+    wide = UNet(wide_cfg)
+    wide.load_state_dict(widen_state_dict(small.state_dict(), small_cfg, wide))
+    x = torch.randn(3, 5, 16, 16)
+    for training in (False, True):
+        small.train(training), wide.train(training)
+        torch.testing.assert_close(wide(x), small(x), rtol=0, atol=1e-6)
+    # The new channels start disconnected from the logits, but what leaves them gets a gradient at once.
+    wide(x).square().mean().backward()
+    assert wide.head.weight.grad[:, 4:].abs().sum() > 0
+    assert wide.downs[0][0].weight.grad[:8, 4:].abs().sum() > 0  # old channels from new inputs
+    with pytest.raises(ValueError, match="narrower"):
+        widen_state_dict(wide.state_dict(), wide_cfg, UNet(small_cfg))
+    with pytest.raises(ValueError, match="depth"):
+        widen_state_dict(small.state_dict(), small_cfg, UNet(UNetConfig(in_channels=5, base=6, depth=3)))
