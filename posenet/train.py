@@ -263,7 +263,7 @@ def load_init_weights(model: PoseNet, path: str) -> None:
     from posenet.checkpoint import checkpoint_files
 
     weights, config = checkpoint_files(path)
-    fix = "give the same --preset, --base, --depth, --modality and --extra-depth as the run that made it"
+    fix = "give the same --preset, --depth, --modality and --extra-depth as the run that made it, and its --base or a larger one"
     state = load_file(weights, device="cpu")
     small = _narrower_unet(config, model)
     if small is not None:  # --base above the checkpoint's: widen it, computing what it computed
