@@ -263,7 +263,10 @@ def load_init_weights(model: PoseNet, path: str) -> None:
     from posenet.checkpoint import checkpoint_files
 
     weights, config = checkpoint_files(path)
-    fix = "give the same --preset, --depth, --modality and --extra-depth as the run that made it, and its --base or a larger one"
+    fix = (
+        "give the same --preset, --depth, --modality and --extra-depth as the run that made it, and its --base "
+        "or a larger one"
+    )
     state = load_file(weights, device="cpu")
     small = _narrower_unet(config, model)
     if small is not None:  # --base above the checkpoint's: widen it, computing what it computed
@@ -298,12 +301,11 @@ def _narrower_unet(config_file: Path, model: PoseNet) -> UNetConfig | None:
     except (TypeError, ValueError):
         return None
     big = model.config.unet
-    same = (small.depth, small.in_channels, small.out_channels) == (
-        big.depth,
-        big.in_channels,
-        big.out_channels,
-    )
-    return small if same and small.base < big.base else None
+
+    def shape(c: UNetConfig) -> tuple[int, int, int]:
+        return c.depth, c.in_channels, c.out_channels
+
+    return small if shape(small) == shape(big) and small.base < big.base else None
 
 
 # ----------------------------------------------------------------------------- training

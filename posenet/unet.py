@@ -31,6 +31,11 @@ class UNetConfig:
     def stride(self) -> int:
         return 2**self.depth
 
+    @property
+    def widths(self) -> list[int]:
+        """Channels of each level, from the first (``base``) to the bottom; each level down doubles them."""
+        return [self.base * 2**i for i in range(self.depth + 1)]
+
 
 class DoubleConv(nn.Sequential):
     """(conv 3x3 -> BatchNorm -> ReLU) x 2, the U-Net's basic block."""
@@ -69,7 +74,7 @@ class UNet(nn.Module):
         if config.depth < 1 or config.base < 1 or config.in_channels < 1:
             raise ValueError(f"invalid UNetConfig {config}")
         self.config = config
-        widths = [config.base * 2**i for i in range(config.depth + 1)]
+        widths = config.widths
         self.stem = DoubleConv(config.in_channels, widths[0])
         self.downs = nn.ModuleList(DoubleConv(widths[i], widths[i + 1]) for i in range(config.depth))
         self.ups = nn.ModuleList(
@@ -143,7 +148,7 @@ def _width(level, cfg: UNetConfig) -> int:
         return cfg.in_channels
     if level == "joints":
         return cfg.out_channels
-    return cfg.base * 2**level
+    return cfg.widths[level]
 
 
 def widen_state_dict(small_state: dict, small: UNetConfig, wide: UNet, prefix: str = "") -> dict:
@@ -166,6 +171,8 @@ def widen_state_dict(small_state: dict, small: UNetConfig, wide: UNet, prefix: s
     out = {prefix + k: v.clone() for k, v in wide.state_dict().items()}
     if unknown := sorted(set(small_state) - set(out)):
         raise ValueError(f"weights that a U-Net of depth {big.depth} does not have: {unknown[:3]}")
+    if missing := sorted(set(out) - set(small_state)):
+        raise ValueError(f"weights of a U-Net of depth {big.depth} that the small one lacks: {missing[:3]}")
     for conv, (level_in, level_out) in _convolutions(small.depth).items():
         if isinstance(level_in, tuple):  # concatenation: [upsampled level i + 1, skip of level i]
             i = level_in[1]
@@ -177,9 +184,7 @@ def widen_state_dict(small_state: dict, small: UNetConfig, wide: UNet, prefix: s
         rows = _width(level_out, small)
         w = out[f"{prefix}{conv}.weight"]
         w[:rows] = 0  # the old channels take nothing from the new ones ...
-        w[:rows, cols] = small_state[f"{prefix}{conv}.weight"].to(
-            w.dtype
-        )  # ... and their own inputs as before
+        w[:rows, cols] = small_state[f"{prefix}{conv}.weight"].to(w.dtype)  # ... their own as before
         if f"{prefix}{conv}.bias" in small_state:
             out[f"{prefix}{conv}.bias"][:rows] = small_state[f"{prefix}{conv}.bias"]
         if conv != "head":  # the BatchNorm right after each convolution of a DoubleConv
