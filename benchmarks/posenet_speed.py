@@ -4,11 +4,11 @@ Usage::
 
     nice python benchmarks/posenet_speed.py --threads 2 [--json OUT.json]
 
-For each preset (``cpu``: 96x96 person crops, U-Net base 16; ``cpu-wide``: the same at base 24; ``paper``: full 320x240 images, base 64) and each
-execution setting (fp32 / bf16 autocast x contiguous / channels_last; ``auto``: the precision this machine gets,
-channels_last, as the service and training run by default; ``onnxruntime`` / ``openvino``: the U-Net on an
-inference runtime, inference only), it times on random 3-view scenes of
-320x240 (the reader's ``subsample=2``):
+For each preset (``cpu``: 96x96 person crops, U-Net base 16; ``cpu-wide``: the same at base 24; ``paper``: full
+320x240 images, base 64) and each execution setting (fp32 / bf16 autocast x contiguous / channels_last; ``auto``:
+the precision this machine gets, channels_last, as the service and training run by default; ``onnxruntime`` /
+``openvino``: the U-Net on an inference runtime, inference only), it times on random 3-view scenes of 320x240 (the
+reader's ``subsample=2``):
 - inference: ms per scene for 1, 3 and 6 persons, all persons x views in one forward pass under
   ``torch.inference_mode`` (input building, U-Net, inverse warp, lifting and aggregation included);
 - training: seconds per scene for one forward + backward + Adam step, with augmentation, 3 persons;
