@@ -37,10 +37,10 @@ from posenet.runtime import installed
 
 PRESETS = {
     "cpu": dict(inputs=InputConfig(mode="crop", crop_size=96, extra_depth=True), base=16, depth=3),
-    # the cpu preset widened (posenet.train --base 24 --init a base-16 checkpoint; docs/RESULTS.md, session 23)
-    "cpu-wide": dict(inputs=InputConfig(mode="crop", crop_size=96, extra_depth=True), base=24, depth=3),
     "paper": dict(inputs=InputConfig(mode="full", extra_depth=False), base=64, depth=4),
 }
+# the cpu preset widened (posenet.train --base 24 --init a base-16 checkpoint; docs/RESULTS.md, session 23)
+PRESETS["cpu-wide"] = {**PRESETS["cpu"], "base": 24}
 SETTINGS = {  # name: (precision, channels_last, backend)
     "fp32": ("fp32", False, "torch"),
     "fp32+channels_last": ("fp32", True, "torch"),
