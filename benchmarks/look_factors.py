@@ -24,7 +24,7 @@ from pathlib import Path
 
 from posenet.data.mvor import load_annotations
 from posenet.data.synth import __main__ as synth
-from posenet.data.synth.looks import LOOKS, PARTS
+from posenet.data.synth.looks import BODY_PARTS, LOOKS, PARTS
 from posenet.evaluate import evaluate
 from posenet.execution import machine_line
 from posenet.infer import PoseEstimator
@@ -74,7 +74,12 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("--look", choices=[k for k in LOOKS if k != "twin"], default="alt", help="the other look")
     p.add_argument(
-        "--parts", nargs="+", choices=PARTS, default=list(PARTS), help="parts to take one at a time"
+        "--parts",
+        nargs="+",
+        choices=PARTS + BODY_PARTS,
+        default=list(PARTS),
+        help="parts to take one at a time (body:REGION: one region of the look's body on the twin's, "
+        f"{', '.join(BODY_PARTS)})",
     )
     p.add_argument(
         "--twin", type=Path, help="the twin of the same MVOR days (default: rendered under --work)"
@@ -102,7 +107,12 @@ def main(argv: list[str] | None = None) -> dict:
     sets = {"twin": args.twin or render(args.work / "twin", "twin", None, args.days, args.mvor, args.workers)}
     for part in args.parts:
         sets[f"twin + {args.look} {part}"] = render(
-            args.work / f"{args.look}_{part}", args.look, [part], args.days, args.mvor, args.workers
+            args.work / f"{args.look}_{part.replace(':', '_')}",
+            args.look,
+            [part],
+            args.days,
+            args.mvor,
+            args.workers,
         )
     sets[f"{args.look} (whole look)"] = args.full or render(
         args.work / args.look, args.look, None, args.days, args.mvor, args.workers

@@ -351,3 +351,84 @@ def test_the_body_grammar_builds_varied_bodies_the_same_every_frame():
     assert repr(frame_primitives(frame)[len(frame.room) :]) == repr(
         grammar_primitives(points, outfit, 0, grammar[0])
     )
+
+
+@needs_mvor
+def test_drawn_gowns_dress_every_body_model_and_leave_the_other_draws_alone():
+    from dataclasses import replace
+
+    from posenet.data.synth.body import body_primitives
+    from posenet.data.synth.body_grammar import grammar_primitives
+    from posenet.data.synth.primitives import CONE
+    from posenet.data.synth.skeleton_full import complete_legs
+
+    plain = random_shape(np.random.default_rng(3))
+    drawn = random_shape(np.random.default_rng(3), drawn_gowns=1.0)
+    assert plain.gown is None and drawn.gown == "cone"
+    assert repr(replace(drawn, gown=None, gown_top=plain.gown_top, gown_radii=plain.gown_radii,
+                        gown_low=plain.gown_low)) == repr(plain)  # fmt: skip  # drawn after everything else
+    rng = np.random.default_rng(4)
+    share = np.mean([random_shape(rng, drawn_gowns=0.5).gown == "cone" for _ in range(300)])
+    assert abs(share - 0.5) < 0.1
+    with pytest.raises(ValueError, match="drawn_gowns"):
+        Look("random", np.random.default_rng(0), drawn_gowns=-0.1)
+
+    ctx = load_twin(json.loads(MVOR_JSON.read_text()))
+    kp = ctx.frames[300].poses[0][1]
+    points = complete_legs(kp[:, :3] @ ctx.cam0_to_world[:3, :3].T + ctx.cam0_to_world[:3, 3])
+    outfit = replace(random_outfit(np.random.default_rng(1)), gown=True)
+    up = np.array([0.0, 0.0, 1.0])
+    knees = (points[F["left_knee"]] + points[F["right_knee"]]) / 2
+    mid_hip = (points[F["left_hip"]] + points[F["right_hip"]]) / 2
+    for build, shape in (
+        (body_primitives, drawn),
+        (grammar_primitives, replace(drawn, model="grammar", grammar=7)),
+    ):
+        cut = replace(shape, gown_top=50.0, gown_radii=(60.0, 150.0), gown_low=200.0, offsets=None)
+        prims = build(points, outfit, 0, cut)
+        cone = prims[-1]  # the gown, whatever the body model
+        assert cone.kind == CONE and cone.material == outfit.top
+        # from above the hips to below the knees, wider at the bottom
+        top, low = (cone.a, cone.b) if cone.a @ up > cone.b @ up else (cone.b, cone.a)
+        assert top @ up > mid_hip @ up and low @ up < knees @ up - 100
+        assert cone.size[int(cone.b @ up < cone.a @ up)] > cone.size[int(cone.a @ up < cone.b @ up)]
+        assert len(build(points, replace(outfit, gown=False), 0, cut)) == len(prims) - 1  # no gown, no cone
+
+
+@needs_mvor
+def test_one_region_of_a_looks_body_on_the_twins():
+    from dataclasses import replace
+
+    from posenet.data.synth.body import TWIN_SHAPE, body_primitives, primitive_regions
+    from posenet.data.synth.body_alt import alt_body_primitives
+    from posenet.data.synth.looks import BODY_PARTS, parse_parts
+    from posenet.data.synth.scene import person_primitives
+    from posenet.data.synth.skeleton_full import complete_legs
+
+    ctx = load_twin(json.loads(MVOR_JSON.read_text()))
+    kp = ctx.frames[300].poses[0][1]
+    points = complete_legs(kp[:, :3] @ ctx.cam0_to_world[:3, :3].T + ctx.cam0_to_world[:3, 3])
+    outfit = replace(random_outfit(np.random.default_rng(1)), gown=True)
+    twin, alt = (
+        body_primitives(points, outfit, 0, TWIN_SHAPE),
+        alt_body_primitives(points, outfit, 0, ALT_SHAPE),
+    )
+    for prims in (twin, alt):
+        regions = primitive_regions(prims, points, gown=True)
+        assert regions[-1] == "gown" and regions.count("gown") == 1
+        assert {"head", "trunk", "arms", "legs"} <= set(regions)
+    assert "gown" not in primitive_regions(twin[:-1], points, gown=False)
+    # all regions: the look's body; none: the twin's; one: the twin's with that region swapped
+    assert repr(person_primitives(points, outfit, 0, replace(ALT_SHAPE, regions=tuple(r for r in
+               ("head", "trunk", "arms", "legs", "gown"))))) == repr(alt)  # fmt: skip
+    assert repr(person_primitives(points, outfit, 0, replace(ALT_SHAPE, regions=()))) == repr(twin)
+    gown = person_primitives(points, outfit, 0, replace(ALT_SHAPE, regions=("gown",)))
+    assert repr(gown) == repr(twin[:-1] + alt[-1:])
+    assert parse_parts(["body:gown", "depth"]) == {"body:gown", "depth"} and len(BODY_PARTS) == 5
+    with pytest.raises(ValueError, match="not both"):
+        parse_parts(["body", "body:head"])
+    look = Look("alt", np.random.default_rng(0), ["body:legs", "body:gown"])
+    person = Person(points, outfit, 0)
+    look.dress(person)
+    assert person.shape.regions == ("legs", "gown") and person.shape.model == "alt"
+    assert person.outfit is outfit  # clothes not taken

@@ -21,7 +21,7 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
-from posenet.data.synth.looks import GRAMMAR_SHARE, LOOKS, PARTS
+from posenet.data.synth.looks import BODY_PARTS, DRAWN_GOWN_SHARE, GRAMMAR_SHARE, LOOKS, PARTS
 from posenet.data.synth.writer import SynthConfig, generate
 
 DEFAULT_MVOR = Path(__file__).resolve().parents[3] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
@@ -101,12 +101,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--look-parts",
         nargs="+",
-        choices=PARTS,
+        choices=PARTS + BODY_PARTS,
         default=None,
         metavar="PART",
         help=f"take only these parts of --look and render the rest as the twin does ({', '.join(PARTS)}); "
         "e.g. --look alt --look-parts depth is the twin seen by the alt look's depth sensor "
-        "(benchmarks/look_factors.py; default: the whole look)",
+        "(benchmarks/look_factors.py; default: the whole look); body:REGION takes one region of the look's body "
+        "(head, trunk, arms, legs, gown) onto the twin's",
     )
     p.add_argument(
         "--grammar-share",
@@ -115,6 +116,15 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="F",
         help="random look: the share of people whose body the body grammar builds (other kinds of trunk, limbs "
         f"and head; docs/synth.md); the rest get the twin's construction in drawn sizes (default {GRAMMAR_SHARE})",
+    )
+    p.add_argument(
+        "--drawn-gowns",
+        type=float,
+        default=DRAWN_GOWN_SHARE,
+        metavar="F",
+        help="random look: the share of people whose gown (when their outfit has one) is of a drawn cut, a cone "
+        "of drawn height, flare and length, whatever builds their body; the rest wear their body model's own "
+        f"skirt (default {DRAWN_GOWN_SHARE}: as before)",
     )
     p.add_argument("--workers", type=int, default=1, help="frames rendered in parallel processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -138,6 +148,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
             look=args.look or "twin",
             look_parts=args.look_parts,
             grammar_share=args.grammar_share,
+            drawn_gowns=args.drawn_gowns,
         )
     # Procedural scenes and sequences: the same procedural world, one frame at a time or over time.
     common = dict(
@@ -150,6 +161,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
         look=args.look or "random",
         look_parts=args.look_parts,
         grammar_share=args.grammar_share,
+        drawn_gowns=args.drawn_gowns,
     )
     if args.sequence:
         return SynthConfig(

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from posenet.data.synth.primitives import Material, Primitive, capsule, ellipsoid, round_cone
+from posenet.data.synth.primitives import CONE, ELLIPSOID, Material, Primitive, capsule, ellipsoid, round_cone
 from posenet.data.synth.skeleton_full import LENGTHS, F, body_frame, unit
 
 # Linear-RGB reflectances. Scrubs and gowns: the blues and greens of OR textiles.
@@ -104,12 +104,45 @@ class BodyShape:
     apron_depth: float = 95.0
     apron_height: float = 0.75
     offsets: np.ndarray | None = None
+    # A gown of a drawn cut instead of the body model's own skirt (the random look's ``gowns="mixed"``): "cone",
+    # from gown_top above the hip midpoint down to gown_low below the knees, flaring from gown_radii[0] to
+    # gown_radii[1] beyond half the hip width (:func:`gown_cone`). None: the body model's own skirt.
+    gown: str | None = None
+    gown_top: float = 40.0
+    gown_radii: tuple[float, float] = (90.0, 130.0)
+    gown_low: float = 90.0
+    # Only these regions (of BODY_REGIONS) are built by this body model, the rest by the twin's construction
+    # with the twin's sizes (``--look-parts body:REGION``, posenet.data.synth.scene.hybrid_primitives). None: all.
+    regions: tuple[str, ...] | None = None
     model: str = "twin"  # "alt": the alt look's own body model (posenet.data.synth.body_alt); "grammar":
     # primitives of drawn kinds (posenet.data.synth.body_grammar), drawn from the seed ``grammar``
     grammar: int | None = None
 
 
 TWIN_SHAPE = BodyShape()
+# A body's regions, for bodies built partly by another model (BodyShape.regions): each primitive belongs to the
+# region of the annotated point nearest its centre, except the gown, the last primitive of every body model.
+BODY_REGIONS = ("head", "trunk", "arms", "legs", "gown")
+REGION_POINTS = {
+    "head": ("head", "neck"),
+    "trunk": ("left_shoulder", "right_shoulder", "left_hip", "right_hip"),
+    "arms": tuple(f"{s}_{j}" for s in ("left", "right") for j in ("elbow", "wrist", "hand")),
+    "legs": tuple(f"{s}_{j}" for s in ("left", "right") for j in ("knee", "ankle", "toe")),
+}
+
+
+def primitive_regions(prims: list[Primitive], points: np.ndarray, gown: bool) -> list[str]:
+    """The region (:data:`BODY_REGIONS`) of each of one body's primitives, built on ``points (NUM_FULL, 3)``;
+    ``gown``: whether the outfit has one (then the last primitive is the gown, when the body model drew one)."""
+    names = [n for pts in REGION_POINTS.values() for n in pts]
+    region_of = [r for r, pts in REGION_POINTS.items() for _ in pts]
+    anchors = points[[F[n] for n in names]]  # (A, 3)
+    centres = np.array([p.center for p in prims], float).reshape(-1, 3)
+    nearest = np.linalg.norm(centres[:, None] - anchors[None], axis=-1).argmin(1)
+    out = [region_of[i] for i in nearest]
+    if gown and prims and prims[-1].kind in (CONE, ELLIPSOID) and out[-1] in ("legs", "trunk"):
+        out[-1] = "gown"
+    return out
 
 
 def _cloth(rgb: np.ndarray, rng: np.random.Generator, texture: float = 0.05) -> Material:
@@ -187,6 +220,22 @@ def tapered_limb(a, b, ra: float, rb: float, owner: int, material: Material) -> 
     if np.linalg.norm(b - a) > abs(ra - rb) + 1:
         return round_cone(a, b, ra, rb, owner, material)
     return capsule(a, b, (ra + rb) / 2, owner, material)
+
+
+def gown_cone(
+    P: dict, mid_hip: np.ndarray, up: np.ndarray, shape: BodyShape, k: float, s: float, owner: int, material
+) -> list[Primitive]:
+    """The drawn gown of ``shape`` (``shape.gown == "cone"``), for any body model: a cone from ``gown_top`` mm
+    above the hip midpoint to ``gown_low`` mm below the knees, ``gown_radii`` mm beyond half the hip width at
+    its top and bottom (thicknesses scale with ``k``, lengths with ``s``, as the body's own)."""
+    knees = (P["left_knee"] + P["right_knee"]) / 2
+    hip_half = float(np.linalg.norm(P["left_hip"] - P["right_hip"])) / 2
+    top = mid_hip + up * shape.gown_top * s
+    low = knees - unit(mid_hip - knees) * shape.gown_low * s
+    ra, rb = (hip_half + r * k for r in shape.gown_radii)
+    if np.linalg.norm(top - low) <= abs(ra - rb) + 1:  # a gown shorter than its flare (odd annotations)
+        return []
+    return [round_cone(top, low, ra, rb, owner, material)]
 
 
 def body_primitives(
@@ -285,7 +334,9 @@ def body_primitives(
         limb(P[f"{side}_hip"], P[f"{side}_knee"], ta * k, tb * k, outfit.trousers)
         limb(P[f"{side}_knee"], P[f"{side}_ankle"], sa * k, sb * k, outfit.trousers)
         cap_(P[f"{side}_ankle"] - up * 25 * s, P[f"{side}_toe"], b.shoe * s, outfit.shoes)
-    if outfit.gown:  # a gown skirt down to the knees
+    if outfit.gown and b.gown == "cone":
+        out += gown_cone(P, mid_hip, up, b, k, s, owner, outfit.top)
+    elif outfit.gown:  # a gown skirt down to the knees
         knees = (P["left_knee"] + P["right_knee"]) / 2
         c = (mid_hip + knees) / 2
         ax_up = unit(mid_hip - knees)

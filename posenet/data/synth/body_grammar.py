@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from posenet.data.synth.body import BodyShape, Outfit, flesh_skeleton, tapered_limb
+from posenet.data.synth.body import BodyShape, Outfit, flesh_skeleton, gown_cone, tapered_limb
 from posenet.data.synth.primitives import Primitive, box, capsule, ellipsoid, round_cone
 from posenet.data.synth.skeleton_full import LENGTHS, unit
 
@@ -149,7 +149,9 @@ def grammar_primitives(points: np.ndarray, outfit: Outfit, owner: int, shape: Bo
             R = np.stack([f, np.cross(up, f), up], 1)
             half_len = float(np.linalg.norm(toe - ankle)) / 2 + 20 * s
             solid("box", (toe + ankle) / 2, (half_len, u(40, 55) * s, u(30, 45) * s), R, outfit.shoes)
-    if outfit.gown:  # a skirt to below the knees: an ellipsoid or a cone
+    if outfit.gown and shape.gown == "cone":
+        out += gown_cone(P, mid_hip, up, shape, k, s, owner, outfit.top)
+    elif outfit.gown:  # a skirt to below the knees: an ellipsoid or a cone
         knees = (P["left_knee"] + P["right_knee"]) / 2
         ax_up = unit(mid_hip - knees)
         lo = knees - ax_up * u(0, 150) * s

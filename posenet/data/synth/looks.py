@@ -21,11 +21,11 @@ its own palette and occluder kinds. ``docs/synth.md`` tabulates the differences.
 from __future__ import annotations
 
 import colorsys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from posenet.data.synth.body import BodyShape, Outfit
+from posenet.data.synth.body import BODY_REGIONS, BodyShape, Outfit
 from posenet.data.synth.body_alt import ALT_SHAPE
 from posenet.data.synth.clutter import add_clutter
 from posenet.data.synth.primitives import Material
@@ -37,15 +37,24 @@ LOOKS = ("twin", "random", "alt")
 PARTS = ("body", "clothes", "colour", "depth", "occluders")
 """The parts of a look that can be taken alone (``--look-parts``): body shape and joint placement; clothing,
 skin and hair; light, shading and colour camera; depth sensor (and its surface dropout); extra occluders."""
+BODY_PARTS = tuple(f"body:{region}" for region in BODY_REGIONS)
+"""One region of a look's body alone (``--look-parts body:gown``): the twin's body with that region's flesh
+built by the look's body model (``posenet.data.synth.scene.hybrid_primitives``)."""
 
 
 GRAMMAR_SHARE = 0.5  # default share of the random look's bodies built by posenet.data.synth.body_grammar
 
 
-def check_grammar_share(share: float) -> float:
+# Default share of the random look's gowned people whose gown is of a drawn cut (BodyShape.gown, a cone of drawn
+# height, flare and length) whatever builds their body; the rest wear their body model's own skirt (the twin's
+# construction: an ellipsoid; the grammar's: an ellipsoid or a cone). 0 renders as before 2026-12-05.
+DRAWN_GOWN_SHARE = 0.0
+
+
+def check_grammar_share(share: float, name: str = "grammar_share") -> float:
     """``share`` as a float, or a clear error when it is no share of the people (outside [0, 1])."""
     if not 0.0 <= share <= 1.0:
-        raise ValueError(f"grammar_share must lie in [0, 1] (a share of the people), got {share}")
+        raise ValueError(f"{name} must lie in [0, 1] (a share of the people), got {share}")
     return float(share)
 
 
@@ -54,9 +63,11 @@ def parse_parts(parts) -> frozenset[str]:
     if isinstance(parts, str):
         parts = [p for p in parts.replace(",", " ").split() if p]
     chosen = frozenset(parts or PARTS)
-    unknown = sorted(chosen - set(PARTS))
+    unknown = sorted(chosen - set(PARTS) - set(BODY_PARTS))
     if unknown:
-        raise ValueError(f"unknown look part(s) {unknown}; expected some of {PARTS}")
+        raise ValueError(f"unknown look part(s) {unknown}; expected some of {PARTS + BODY_PARTS}")
+    if "body" in chosen and chosen & set(BODY_PARTS):
+        raise ValueError("give the whole body ('body') or some of its regions ('body:REGION'), not both")
     return chosen
 
 
@@ -79,12 +90,18 @@ class Look:
     tells how much of a look's cost is its sensor (``benchmarks/look_factors.py``)."""
 
     def __init__(
-        self, name: str, rng: np.random.Generator, parts=None, grammar_share: float = GRAMMAR_SHARE
+        self,
+        name: str,
+        rng: np.random.Generator,
+        parts=None,
+        grammar_share: float = GRAMMAR_SHARE,
+        drawn_gowns: float = DRAWN_GOWN_SHARE,
     ) -> None:
         if name not in LOOKS:
             raise ValueError(f"unknown look {name!r}; expected one of {LOOKS}")
         self.name, self.rng, self.parts = name, rng, parse_parts(parts)
         self.grammar_share = check_grammar_share(grammar_share)
+        self.drawn_gowns = check_grammar_share(drawn_gowns, "drawn_gowns")
         self.scene, self.lighting = (None, None)
         if name == "random":
             self.scene, self.lighting = random_scene(rng)
@@ -94,7 +111,8 @@ class Look:
     def dress(self, person) -> None:
         """Give a :class:`~posenet.data.synth.scene.Person` this look's outfit and body (in place)."""
         if self.name == "random":
-            outfit, shape = random_outfit(self.rng, person.role), random_shape(self.rng, self.grammar_share)
+            outfit = random_outfit(self.rng, person.role)
+            shape = random_shape(self.rng, self.grammar_share, self.drawn_gowns)
         elif self.name == "alt":
             outfit, shape = alt_outfit(self.rng, person.role), ALT_SHAPE
         else:
@@ -103,6 +121,8 @@ class Look:
             person.outfit = outfit
         if "body" in self.parts:
             person.shape = shape
+        elif regions := tuple(p.split(":")[1] for p in BODY_PARTS if p in self.parts):
+            person.shape = replace(shape, regions=regions)
 
     def finish(self, frame, rig: Rig, protect: set[tuple[int, int]] | None = None) -> dict[str, int]:
         """Add this look's occluders (covering little of the ``protect`` (view, person) pairs) and set its
@@ -132,11 +152,15 @@ class Look:
 
 
 def make_look(
-    name: str, rng: np.random.Generator, parts=None, grammar_share: float = GRAMMAR_SHARE
+    name: str,
+    rng: np.random.Generator,
+    parts=None,
+    grammar_share: float = GRAMMAR_SHARE,
+    drawn_gowns: float = DRAWN_GOWN_SHARE,
 ) -> Look | None:
     """The :class:`Look` for ``name`` (only its ``parts``, default all), or None for ``twin`` (which draws
     nothing)."""
-    return None if name == "twin" else Look(name, rng, parts, grammar_share)
+    return None if name == "twin" else Look(name, rng, parts, grammar_share, drawn_gowns)
 
 
 # ------------------------------------------------------------------ random: bodies
@@ -167,19 +191,25 @@ def random_offsets(rng: np.random.Generator) -> np.ndarray:
     return o
 
 
-def random_shape(rng: np.random.Generator, grammar_share: float = GRAMMAR_SHARE) -> BodyShape:
+def random_shape(
+    rng: np.random.Generator, grammar_share: float = GRAMMAR_SHARE, drawn_gowns: float = DRAWN_GOWN_SHARE
+) -> BodyShape:
     """A body within anthropometric ranges: overall girth 0.88-1.18 of the twin's, each part +-10-20 % about
     it, chest and belly depths, shoulder and hip widths of the flesh, a paunch for 30 %, skull 0.92-1.08, and
     the joint placement of :func:`random_offsets`. A share ``grammar_share`` of them (default half) is built
     by the body grammar (:mod:`posenet.data.synth.body_grammar`: other kinds of trunk, limbs and head) instead
-    of the twin's construction; the joint placement applies to both."""
+    of the twin's construction; the joint placement applies to both. A share ``drawn_gowns`` of them (default
+    none) gets a gown of a drawn cut whatever builds the body (:func:`~posenet.data.synth.body.gown_cone`: from
+    30 mm below to 100 mm above the hip midpoint down to 0-350 mm below the knees, 40-130 mm beyond half the hip
+    width at its top and 0-100 mm more at its bottom), worn when the outfit has a gown; it is drawn after
+    everything else, so a person's other draws stay those of ``drawn_gowns=0``."""
     u = rng.uniform
     g = u(0.88, 1.18)
 
     def part(twin_value: float, lo: float = 0.88, hi: float = 1.12) -> float:
         return float(twin_value * g * u(lo, hi))
 
-    return BodyShape(
+    shape = BodyShape(
         head=u(0.92, 1.08),
         head_out=u(1.15, 1.45),
         head_back=u(0, 25),
@@ -209,6 +239,11 @@ def random_shape(rng: np.random.Generator, grammar_share: float = GRAMMAR_SHARE)
         offsets=random_offsets(rng),
         **({"model": "grammar", "grammar": int(rng.integers(2**31))} if rng.random() < grammar_share else {}),
     )
+    if drawn_gowns > 0 and rng.random() < drawn_gowns:
+        top = u(40, 130)
+        shape = replace(shape, gown="cone", gown_top=u(-30, 100), gown_radii=(top, top + u(0, 100)),
+                        gown_low=u(0, 350))  # fmt: skip
+    return shape
 
 
 # ------------------------------------------------------------------ random: clothing

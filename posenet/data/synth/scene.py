@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from posenet.data.synth.body import TWIN_SHAPE, BodyShape, Outfit, body_primitives
+from posenet.data.synth.body import TWIN_SHAPE, BodyShape, Outfit, body_primitives, primitive_regions
 from posenet.data.synth.body_alt import alt_body_primitives
 from posenet.data.synth.body_grammar import grammar_primitives
 from posenet.data.synth.primitives import SHELL, Primitive
@@ -106,12 +106,36 @@ class ViewRender:
 BUILDERS = {"alt": alt_body_primitives, "grammar": grammar_primitives}  # BodyShape.model -> its body model
 
 
+def hybrid_primitives(points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape) -> list[Primitive]:
+    """One body built by two models: the regions ``shape.regions`` by ``shape``'s own body model, the rest by the
+    twin's construction at the twin's sizes (``--look-parts body:REGION``: which region of a look's body costs,
+    ``benchmarks/look_factors.py``). Each model builds the whole body and keeps its regions'
+    primitives (:func:`~posenet.data.synth.body.primitive_regions`)."""
+    own = BUILDERS.get(shape.model, body_primitives)(points, outfit, owner, replace(shape, regions=None))
+    twin = body_primitives(points, outfit, owner, TWIN_SHAPE)
+    keep = [
+        p
+        for p, r in zip(twin, primitive_regions(twin, points, outfit.gown), strict=True)
+        if r not in shape.regions
+    ]
+    take = [
+        p for p, r in zip(own, primitive_regions(own, points, outfit.gown), strict=True) if r in shape.regions
+    ]
+    return keep + take
+
+
+def person_primitives(points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape) -> list[Primitive]:
+    """The primitives of one person's body, by ``shape``'s body model (or two of them, ``shape.regions``)."""
+    if shape.regions is not None:
+        return hybrid_primitives(points, outfit, owner, shape)
+    return BUILDERS.get(shape.model, body_primitives)(points, outfit, owner, shape)
+
+
 def frame_primitives(frame: Frame) -> list[Primitive]:
     """All primitives of a frame, the persons' owned by their index."""
     prims = list(frame.room)
     for i, person in enumerate(frame.persons):
-        build = BUILDERS.get(person.shape.model, body_primitives)
-        prims += build(person.points, person.outfit, i, person.shape)
+        prims += person_primitives(person.points, person.outfit, i, person.shape)
         prims += [replace(p, owner=i) for p in person.extra]
     return prims
 

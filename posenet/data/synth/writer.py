@@ -31,7 +31,15 @@ import numpy as np
 from tqdm import tqdm
 
 from posenet.data.images import COLOR_PNG_PARAMS, DEPTH_PNG_PARAMS
-from posenet.data.synth.looks import GRAMMAR_SHARE, LOOKS, Look, check_grammar_share, make_look, parse_parts
+from posenet.data.synth.looks import (
+    DRAWN_GOWN_SHARE,
+    GRAMMAR_SHARE,
+    LOOKS,
+    Look,
+    check_grammar_share,
+    make_look,
+    parse_parts,
+)
 from posenet.data.synth.procedural import procedural_frame
 from posenet.data.synth.rig import Rig, random_rig
 from posenet.data.synth.scene import Frame, render_frame
@@ -75,6 +83,7 @@ class SynthConfig:
     # only these parts of the look (looks.PARTS), the rest as the twin renders it; None: all of them
     look_parts: list[str] | None = None
     grammar_share: float = GRAMMAR_SHARE  # random look: share of bodies built by the body grammar
+    drawn_gowns: float = DRAWN_GOWN_SHARE  # random look: share of bodies with a gown of a drawn cut
     frames: int = 60  # sequence: frames per sequence
     fps: float = 15.0  # sequence: frame rate (the frames' timestamp_s)
     persons: int = 3  # sequence: clinicians in the sequence (not all in the room all the time)
@@ -214,7 +223,11 @@ def sequence_stage(cfg: SynthConfig, rigs: DatasetRigs, day: int) -> tuple[Stage
     stages = _STATE.setdefault("stages", {})
     if day not in stages:
         look = make_look(
-            cfg.look, frame_rng(cfg.seed, cfg.mode, day, 0, purpose=4), cfg.look_parts, cfg.grammar_share
+            cfg.look,
+            frame_rng(cfg.seed, cfg.mode, day, 0, purpose=4),
+            cfg.look_parts,
+            cfg.grammar_share,
+            cfg.drawn_gowns,
         )
         rng = frame_rng(cfg.seed, cfg.mode, day, 0, purpose=3)
         stages[day] = build_stage(rng, rigs.rigs[day], cfg.frames, cfg.fps, cfg.persons, look)
@@ -255,6 +268,7 @@ def render_job(job: Job) -> JobResult:
         frame_rng(cfg.seed, cfg.mode, job.day, job.frame, purpose=2),
         cfg.look_parts,
         cfg.grammar_share,
+        cfg.drawn_gowns,
     )
     frame, stats = _build_frame(cfg, rigs, twin, job, rng, look)
     rig = rigs.rigs[job.day]
@@ -359,6 +373,7 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
         raise ValueError(f"unknown look {cfg.look!r}; expected one of {LOOKS}")
     parse_parts(cfg.look_parts)  # clear errors before any frame is rendered
     check_grammar_share(cfg.grammar_share)
+    check_grammar_share(cfg.drawn_gowns, "drawn_gowns")
     twin = None
     if cfg.mode == "twin" or cfg.rig == "mvor":
         if not cfg.mvor_annotations or not Path(cfg.mvor_annotations).is_file():
