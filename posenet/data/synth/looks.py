@@ -51,7 +51,7 @@ GRAMMAR_SHARE = 0.5  # default share of the random look's bodies built by posene
 DRAWN_GOWN_SHARE = 0.0
 
 
-def check_grammar_share(share: float, name: str = "grammar_share") -> float:
+def check_share(share: float, name: str = "grammar_share") -> float:
     """``share`` as a float, or a clear error when it is no share of the people (outside [0, 1])."""
     if not 0.0 <= share <= 1.0:
         raise ValueError(f"{name} must lie in [0, 1] (a share of the people), got {share}")
@@ -100,8 +100,8 @@ class Look:
         if name not in LOOKS:
             raise ValueError(f"unknown look {name!r}; expected one of {LOOKS}")
         self.name, self.rng, self.parts = name, rng, parse_parts(parts)
-        self.grammar_share = check_grammar_share(grammar_share)
-        self.drawn_gowns = check_grammar_share(drawn_gowns, "drawn_gowns")
+        self.grammar_share = check_share(grammar_share)
+        self.drawn_gowns = check_share(drawn_gowns, "drawn_gowns")
         self.scene, self.lighting = (None, None)
         if name == "random":
             self.scene, self.lighting = random_scene(rng)

@@ -36,7 +36,7 @@ from posenet.data.synth.looks import (
     GRAMMAR_SHARE,
     LOOKS,
     Look,
-    check_grammar_share,
+    check_share,
     make_look,
     parse_parts,
 )
@@ -372,8 +372,8 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
     if cfg.look not in LOOKS:
         raise ValueError(f"unknown look {cfg.look!r}; expected one of {LOOKS}")
     parse_parts(cfg.look_parts)  # clear errors before any frame is rendered
-    check_grammar_share(cfg.grammar_share)
-    check_grammar_share(cfg.drawn_gowns, "drawn_gowns")
+    check_share(cfg.grammar_share)
+    check_share(cfg.drawn_gowns, "drawn_gowns")
     twin = None
     if cfg.mode == "twin" or cfg.rig == "mvor":
         if not cfg.mvor_annotations or not Path(cfg.mvor_annotations).is_file():
