@@ -25,7 +25,7 @@ from posenet.data.synth.looks import (
 from posenet.data.synth.raster import GBuffer, Intrinsics
 from posenet.data.synth.scene import Person, render_frame
 from posenet.data.synth.sensor import ColourSensorConfig, DepthSensorConfig, simulate_depth
-from posenet.data.synth.skeleton_full import F
+from posenet.data.synth.skeleton_full import F, complete_legs
 from posenet.data.synth.twin import load_twin, twin_frame
 from posenet.data.synth.writer import frame_rng
 
@@ -99,6 +99,12 @@ def mvor_frames():
         frame, _ = twin_frame(ctx, info, rng, make_look(look, frame_rng(0, "twin", info.day, info.frame, 2)))
         out[look] = frame, render_frame(frame, ctx.rig, rng)
     return out
+
+
+def _frame300_person(ctx) -> np.ndarray:
+    """Person 0 of MVOR's frame 300 as a full skeleton ``(NUM_FULL, 3)`` in the twin's world frame (mm)."""
+    kp = ctx.frames[300].poses[0][1]
+    return complete_legs(kp[:, :3] @ ctx.cam0_to_world[:3, :3].T + ctx.cam0_to_world[:3, 3])
 
 
 def _views_digest(views) -> str:
@@ -326,7 +332,6 @@ def test_the_body_grammar_builds_varied_bodies_the_same_every_frame():
     from posenet.data.synth.body_grammar import grammar_primitives
     from posenet.data.synth.looks import GRAMMAR_SHARE
     from posenet.data.synth.scene import frame_primitives
-    from posenet.data.synth.skeleton_full import complete_legs
 
     ctx = load_twin(json.loads(MVOR_JSON.read_text())) if MVOR_JSON.is_file() else None
     rng = np.random.default_rng(0)
@@ -343,8 +348,7 @@ def test_the_body_grammar_builds_varied_bodies_the_same_every_frame():
     if ctx is None:
         pytest.skip("MVOR annotations not found")
     info = ctx.frames[300]
-    kp = info.poses[0][1]
-    points = complete_legs(kp[:, :3] @ ctx.cam0_to_world[:3, :3].T + ctx.cam0_to_world[:3, 3])
+    points = _frame300_person(ctx)
     outfit = random_outfit(np.random.default_rng(1))
     kinds = set()
     for shape in grammar[:30]:
@@ -371,7 +375,6 @@ def test_drawn_gowns_dress_every_body_model_and_leave_the_other_draws_alone():
     from posenet.data.synth.body import body_primitives
     from posenet.data.synth.body_grammar import grammar_primitives
     from posenet.data.synth.primitives import CONE
-    from posenet.data.synth.skeleton_full import complete_legs
 
     plain = random_shape(np.random.default_rng(3))
     drawn = random_shape(np.random.default_rng(3), drawn_gowns=1.0)
@@ -384,9 +387,7 @@ def test_drawn_gowns_dress_every_body_model_and_leave_the_other_draws_alone():
     with pytest.raises(ValueError, match="drawn_gowns"):
         Look("random", np.random.default_rng(0), drawn_gowns=-0.1)
 
-    ctx = load_twin(json.loads(MVOR_JSON.read_text()))
-    kp = ctx.frames[300].poses[0][1]
-    points = complete_legs(kp[:, :3] @ ctx.cam0_to_world[:3, :3].T + ctx.cam0_to_world[:3, 3])
+    points = _frame300_person(load_twin(json.loads(MVOR_JSON.read_text())))
     outfit = replace(random_outfit(np.random.default_rng(1)), gown=True)
     up = np.array([0.0, 0.0, 1.0])
     knees = (points[F["left_knee"]] + points[F["right_knee"]]) / 2
@@ -414,11 +415,8 @@ def test_one_region_of_a_looks_body_on_the_twins():
     from posenet.data.synth.body_alt import alt_body_primitives
     from posenet.data.synth.looks import BODY_PARTS, parse_parts
     from posenet.data.synth.scene import person_primitives
-    from posenet.data.synth.skeleton_full import complete_legs
 
-    ctx = load_twin(json.loads(MVOR_JSON.read_text()))
-    kp = ctx.frames[300].poses[0][1]
-    points = complete_legs(kp[:, :3] @ ctx.cam0_to_world[:3, :3].T + ctx.cam0_to_world[:3, 3])
+    points = _frame300_person(load_twin(json.loads(MVOR_JSON.read_text())))
     outfit = replace(random_outfit(np.random.default_rng(1)), gown=True)
     twin, alt = (
         body_primitives(points, outfit, 0, TWIN_SHAPE),

@@ -111,7 +111,7 @@ def hybrid_primitives(points: np.ndarray, outfit: Outfit, owner: int, shape: Bod
     twin's construction at the twin's sizes (``--look-parts body:REGION``: which region of a look's body costs,
     ``benchmarks/look_factors.py``). Each model builds the whole body and keeps its regions'
     primitives (:func:`~posenet.data.synth.body.primitive_regions`)."""
-    own = BUILDERS.get(shape.model, body_primitives)(points, outfit, owner, replace(shape, regions=None))
+    own = person_primitives(points, outfit, owner, replace(shape, regions=None))
     twin = body_primitives(points, outfit, owner, TWIN_SHAPE)
     keep = [
         p
