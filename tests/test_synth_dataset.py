@@ -135,3 +135,38 @@ def test_twin_keeps_mvor_rig_ids_poses_and_box_presence(tmp_path):
         ih = max(min(y + h, Y + H) - max(y, Y), 0)
         ious.append(iw * ih / (w * h + W * H - iw * ih))
     assert np.mean(ious) > 0.5
+
+
+@pytest.mark.skipif(not MVOR_JSON.is_file(), reason=f"MVOR annotations not found at {MVOR_JSON}")
+@pytest.mark.parametrize(("day", "frame"), [(4, 38), (1, 24)])
+def test_twin_writes_each_person_once_where_mvor_reuses_an_id(tmp_path, day, frame):
+    """MVOR gives two people id 0 in day 4 frame 38, and lists one pose twice in day 1 frame 24: the twin writes
+    each real pose once, under an id of its own, with the boxes of the person it rendered from that pose."""
+    real = json.loads(MVOR_JSON.read_text())
+    mv_id = "_".join(f"{day}00{cam}0000{frame:03d}" for cam in (1, 2, 3))
+    real_poses = {tuple(p["keypoints3D"]) for p in real["annotations3D"] if p["image_ids"] == mv_id}
+    assert sum(p["image_ids"] == mv_id for p in real["annotations3D"]) == 2
+    out = tmp_path / "twin"
+    main(["--out", str(out), "--from-mvor", str(MVOR_JSON), "--mvor-days", str(day), "--stride", str(frame),
+          "--limit", "2", "--quiet"])  # fmt: skip
+    ann = json.loads((out / "annotations.json").read_text())
+    ours = [p for p in ann["annotations3D"] if p["image_ids"] == mv_id]
+    assert {tuple(p["keypoints3D"]) for p in ours} == real_poses and len(ours) == len(real_poses)
+    ids = [p["person_id"] for p in ours]
+    assert len(set(ids)) == len(ids)
+    image_ids = {int(i) for i in mv_id.split("_")}
+    boxes = [(b["image_id"], b["person_id"]) for b in ann["annotations"] if b["image_id"] in image_ids]
+    assert len(set(boxes)) == len(boxes)  # no id twice in one view
+    assert {pid for _, pid in boxes if pid >= 0} <= set(ids)
+    # The reader pairs each pose with its own boxes: each pose's reference boxes lie around its projected joints.
+    data = MvorDataset(out, out / "annotations.json")
+    sample = data[data.ids.index(mv_id)]
+    for k, pid in enumerate(sample.person_ids.tolist()):
+        for view in sample.views:
+            box = view.boxes[view.box_person_ids == pid]
+            if len(box):
+                uv = view.camera.project(
+                    torch.as_tensor(sample.poses[k][sample.valid[k]], dtype=torch.float64)
+                ).numpy()
+                inside = (uv >= box[0, :2] - 20) & (uv <= box[0, 2:] + 20)
+                assert inside.all(-1).mean() > 0.7

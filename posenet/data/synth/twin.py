@@ -121,14 +121,14 @@ def load_twin(ann: dict) -> TwinContext:
                     roles[a["person_id"]] = a["person_role"]
                 elif a["person_role"] == "patient":
                     patient[v] = _xyxy(a["bbox"])
-        poses = [
-            (
-                p["person_id"],
-                np.asarray(p["keypoints3D"], float).reshape(12, 4),
-                roles.get(p["person_id"], "clinician"),
-            )
-            for p in poses_by_mv.get(mv["id"], [])
-        ]
+        poses, listed = [], set()
+        for p in poses_by_mv.get(mv["id"], []):
+            key = (p["person_id"], tuple(p["keypoints3D"]))
+            if key in listed:  # MVOR lists one pose twice in day 1 frame 24: one person, rendered once
+                continue
+            listed.add(key)
+            kp = np.asarray(p["keypoints3D"], float).reshape(12, 4)
+            poses.append((p["person_id"], kp, roles.get(p["person_id"], "clinician")))
         posed = {p[0] for p in poses}
         bystanders = [
             (img_to_cam[a["image_id"]], _xyxy(a["bbox"]))
@@ -348,4 +348,21 @@ def twin_frame(
     stats = add_occluders(frame, ctx.rig, must_hide, must_show, ceiling)
     if look is not None:
         stats |= look.finish(frame, ctx.rig, must_show)
+    unique_ids(persons[: len(info.poses)])
     return frame, dict(stats, **stats_by)
+
+
+def unique_ids(persons: list[Person]) -> None:
+    """Give each person after the first with an id already taken a fresh id (the frame's largest + 1, ...).
+
+    MVOR gives two different 3D poses one id in three frames (day 3 frames 115 and 185, day 4 frame 38; it lists
+    one pose twice in day 1 frame 24, which :func:`load_twin` reads once). Its own boxes cannot say which box is whose; the twin's can, since it renders each
+    person, so its files name each person once: every box and 3D pose written under an id belongs to one person.
+    Before 2026-12-05 both persons were written with the first pose, and reference boxes of two people were
+    fused as one."""
+    taken: set[int] = set()
+    fresh = max((p.person_id for p in persons), default=-1) + 1
+    for p in persons:
+        if p.person_id in taken:
+            p.person_id, fresh = fresh, fresh + 1
+        taken.add(p.person_id)

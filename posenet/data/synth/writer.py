@@ -330,8 +330,8 @@ def render_job(job: Job) -> JobResult:
         if person.person_id < 0 or (support[i] == 0 and cfg.mode != "twin"):
             continue  # the twin keeps every real pose, even one its own boxes miss (MVOR reuses ids)
         if cfg.mode == "twin":
-            kp3 = next(kp for pid, kp, _ in twin.frames[job.index].poses if pid == person.person_id)
-            flat = kp3.ravel().tolist()  # the real annotation, unchanged
+            # the frame's first persons are its real poses, in order (twin_frame; ids made unique there)
+            flat = twin.frames[job.index].poses[i][1].ravel().tolist()  # the real annotation, unchanged
         else:
             pts = person.points[:NUM_MVOR_POINTS] @ world_to_ref[:3, :3].T + world_to_ref[:3, 3]
             seen[i, 10], seen[i, 11] = seen[i, 8], seen[i, 9]  # hands follow the wrists
