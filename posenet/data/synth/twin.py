@@ -356,10 +356,10 @@ def unique_ids(persons: list[Person]) -> None:
     """Give each person after the first with an id already taken a fresh id (the frame's largest + 1, ...).
 
     MVOR gives two different 3D poses one id in three frames (day 3 frames 115 and 185, day 4 frame 38; it lists
-    one pose twice in day 1 frame 24, which :func:`load_twin` reads once). Its own boxes cannot say which box is whose; the twin's can, since it renders each
-    person, so its files name each person once: every box and 3D pose written under an id belongs to one person.
-    Before 2026-12-05 both persons were written with the first pose, and reference boxes of two people were
-    fused as one."""
+    one pose twice in day 1 frame 24, which :func:`load_twin` reads once). Its own boxes cannot say which box is
+    whose; the twin's can, since it renders each person, so its files name each person once: every box and 3D
+    pose written under an id belongs to one person. Before 2026-12-05 both persons were written with the first
+    pose, and reference boxes of the two people were fused as one."""
     taken: set[int] = set()
     fresh = max((p.person_id for p in persons), default=-1) + 1
     for p in persons:
