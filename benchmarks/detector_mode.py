@@ -26,6 +26,10 @@ milliseconds of the matcher
 ``--single-view`` also scores each reference box's single-view skeleton (the box lifted alone: what the
 skeleton matcher compares across views) against its person's annotated pose.
 
+``--worst N`` also lists, per number of supporting views, the N poses that the default variant answers worst
+against reference boxes (each pose's mean over the per-support joints) and their share of the excess: on the
+twin's day 4 (2026-12-05) one frame of five clinicians in a cluster holds most of the three-view excess.
+
 ``--picture PNG`` also draws the frame where the default took the most unsure boxes: every detected box of
 each view, coloured by the person it ended in (solid: sure, dashed: unsure and taken), unsure boxes that
 completed nobody dotted grey, and sure boxes in no person (dropped as outliers, or by the free-space rule) in red.
@@ -35,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -44,10 +49,11 @@ from tqdm import tqdm
 from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig, _lifted
 from posenet.boxes import ground_truth_ids
 from posenet.data.mvor import image_day, load_annotations
-from posenet.evaluate import evaluate, prediction_record
+from posenet.evaluate import evaluate, match_predictions, prediction_record
 from posenet.execution import machine_line
 from posenet.predict import read_dataset
 from posenet.scene import views_of
+from posenet.skeleton import JOINT_TYPES, SUPPORT_TYPES
 from service.pipeline import PipelineConfig, ScenePipeline
 
 VARIANTS = {  # name: (candidate_score, the outlier rule at its default, the free-space rule at its default)
@@ -150,6 +156,35 @@ def draw_frame(pipe: ScenePipeline, sample, out: Path) -> None:
     Image.open(out).convert("RGB").quantize(colors=256).save(out, optimize=True)  # a third of the bytes
 
 
+def worst_poses(gt: dict, reference: list[dict], detected: list[dict], days, n: int) -> dict:
+    """Per number of supporting views, where detector mode loses against reference boxes: each annotated pose's
+    mean error over the per-support joints (shoulders, hips, elbows, wrists; cm) with either boxes, the share of
+    the excess held by the ``n`` poses that lose most, and those poses (frame, person, reference, detected)."""
+    ref, det = (match_predictions(gt, p, days=days) for p in (reference, detected))
+    types = [j for t in SUPPORT_TYPES for j in JOINT_TYPES[t]]
+
+    def per_pose(m):
+        e = np.where(m.valid & m.matched[:, None], m.errors, np.nan)[:, types]
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # a pose without any of those joints
+            return np.nanmean(e, axis=1) / 10
+
+    er, ed = per_pose(ref), per_pose(det)
+    out = {}
+    for s in sorted(set(ref.support.tolist())):
+        rows = np.flatnonzero((ref.support == s) & np.isfinite(er) & np.isfinite(ed))
+        excess = ed[rows] - er[rows]
+        order = rows[np.argsort(-excess)][:n]
+        total = float(excess.sum())
+        out[str(s)] = {
+            "poses": len(rows), "excess_cm": total,
+            "share_of_worst": float((ed[order] - er[order]).sum() / total) if total > 0 else float("nan"),
+            "worst": [{"frame": ref.records[i]["image_ids"], "person_id": ref.records[i]["person_id"],
+                       "reference_cm": float(er[i]), "detected_cm": float(ed[i])} for i in order],
+        }  # fmt: skip
+    return out
+
+
 def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
@@ -168,6 +203,9 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument(
         "--picture", type=Path, help="draw the frame where the default took most unsure boxes (PNG)"
     )
+    p.add_argument("--worst", type=int, default=0, metavar="N",
+                   help="also list, per number of supporting views, the N poses that the default variant answers "
+                   "worst against reference boxes, and their share of its excess")  # fmt: skip
     p.add_argument("--single-view", action="store_true",
                    help="also score each reference box's single-view skeleton (the box lifted alone, what the "
                    "skeleton matcher compares): mean error, and the median / 90th percentile of its median joint")  # fmt: skip
@@ -260,6 +298,19 @@ def main(argv: list[str] | None = None) -> dict:
         sv = rows["reference"]["single_view_cm"]
         print(f"single-view skeletons of {sv['boxes']} reference boxes: mean {sv['mean']:.2f} cm; median joint: "
               f"median {sv['median_joint_median']:.2f}, 90th percentile {sv['median_joint_p90']:.2f} cm")  # fmt: skip
+    if args.worst:
+        last = args.variants[-1]
+        found = worst_poses(gt, preds["reference"], preds[last], days, args.worst)
+        rows[last]["worst"] = found
+        for s, w in found.items():
+            print(
+                f"{last}, {s} view(s): the {len(w['worst'])} poses that lose most hold "
+                f"{100 * w['share_of_worst']:.0f} % of the excess ({w['excess_cm']:.1f} cm over {w['poses']} poses)"
+            )
+            for q in w["worst"]:
+                print(
+                    f"    {q['frame']} person {q['person_id']}: {q['reference_cm']:.1f} -> {q['detected_cm']:.1f} cm"
+                )
     if args.picture and best[1] is not None:
         variant = pipes[args.variants[-1]]
         sample = ds[best[1]]

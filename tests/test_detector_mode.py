@@ -1,4 +1,5 @@
-"""benchmarks/detector_mode.py --single-view: each reference box's single-view skeleton, scored against its person."""
+"""benchmarks/detector_mode.py: --single-view (each reference box's single-view skeleton, scored against its person)
+and --worst (the poses that lose most against reference boxes)."""
 
 from __future__ import annotations
 
@@ -7,17 +8,20 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 from conftest import write_tiny_mvor
 
 from posenet.data.mvor import MvorDataset
+from posenet.data.support import pose_support
+from posenet.evaluate import prediction_record
 from posenet.infer import PoseEstimator
 from posenet.model import ModelConfig, PoseNet
 from posenet.scene import views_of
 from service.pipeline import ScenePipeline
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
-from detector_mode import single_view_errors  # noqa: E402
+from detector_mode import single_view_errors, worst_poses  # noqa: E402
 
 
 def test_single_view_errors_equal_the_fused_error_of_persons_boxed_once(tmp_path):
@@ -47,3 +51,35 @@ def test_single_view_errors_equal_the_fused_error_of_persons_boxed_once(tmp_path
             np.testing.assert_allclose(err[k], [d.mean(), np.median(d)], rtol=1e-4, atol=0.05)
             checked += 1
     assert checked, "the tiny frames should hold a person boxed in one view"
+
+
+def test_worst_poses_finds_the_poses_moved_and_their_share_of_the_excess(tmp_path):
+    """Detected answers equal to the reference ones except two poses, moved by 30 and 10 cm: per support, those
+    poses lead the list with the excess they were given, and hold all of it."""
+    data = write_tiny_mvor(tmp_path, days=(1, 2), frames_per_day=3)
+    gt = data.gt
+    support = pose_support(gt)
+    poses = gt["annotations3D"]
+    rng = np.random.default_rng(0)
+    joints = [np.asarray(p["keypoints3D"], float).reshape(-1, 4)[:10, :3] for p in poses]
+    reference = [prediction_record(p["image_ids"], p["person_id"], j + rng.normal(0, 20, j.shape))
+                 for p, j in zip(poses, joints, strict=True)]  # fmt: skip
+    detected = [dict(r) for r in reference]
+    moved = {0: 300.0, len(poses) - 1: 100.0}  # pose index -> mm along x
+    for i, mm in moved.items():
+        flat = np.asarray(detected[i]["keypoints3D"], float).reshape(-1, 3) + [mm, 0, 0]
+        detected[i] = prediction_record(poses[i]["image_ids"], poses[i]["person_id"], flat)
+    found = worst_poses(gt, reference, detected, None, n=2)
+    assert sum(w["poses"] for w in found.values()) == len(poses)
+    big, small = sorted(moved, key=moved.get, reverse=True)
+    for i in (big, small):
+        w = found[str(support[i])]
+        listed = [(q["frame"], q["person_id"]) for q in w["worst"]]
+        place = 1 if i == small and support[small] == support[big] else 0  # the larger move comes first
+        assert listed[place] == (poses[i]["image_ids"], poses[i]["person_id"])
+        assert w["worst"][place]["detected_cm"] > w["worst"][place]["reference_cm"]
+        # every other pose is answered alike with either boxes: the moved ones hold all the excess
+        assert w["share_of_worst"] == pytest.approx(1.0)
+    for s, w in found.items():
+        if all(str(support[i]) != s for i in moved):
+            assert w["excess_cm"] == 0.0
