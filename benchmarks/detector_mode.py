@@ -26,9 +26,10 @@ milliseconds of the matcher
 ``--single-view`` also scores each reference box's single-view skeleton (the box lifted alone: what the
 skeleton matcher compares across views) against its person's annotated pose.
 
-``--worst N`` also lists, per number of supporting views, the N poses that the default variant answers worst
-against reference boxes (each pose's mean over the per-support joints) and their share of the excess: on the
-twin's day 4 (2026-12-05) one frame of five clinicians in a cluster holds most of the three-view excess.
+``--worst N`` also lists, per number of supporting views, the N poses that the last variant (the default unless
+``--variants`` says otherwise) answers worst against reference boxes (each pose's mean over the per-support
+joints) and their share of the excess: on the twin's day 4 (2026-12-05) one frame of five clinicians in a
+cluster holds most of the three-view excess.
 
 ``--picture PNG`` also draws the frame where the default took the most unsure boxes: every detected box of
 each view, coloured by the person it ended in (solid: sure, dashed: unsure and taken), unsure boxes that
@@ -49,7 +50,7 @@ from tqdm import tqdm
 from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig, _lifted
 from posenet.boxes import ground_truth_ids
 from posenet.data.mvor import image_day, load_annotations
-from posenet.evaluate import evaluate, match_predictions, prediction_record
+from posenet.evaluate import MM_PER_CM, evaluate, match_predictions, prediction_record
 from posenet.execution import machine_line
 from posenet.predict import read_dataset
 from posenet.scene import views_of
@@ -167,7 +168,7 @@ def worst_poses(gt: dict, reference: list[dict], detected: list[dict], days, n: 
         e = np.where(m.valid & m.matched[:, None], m.errors, np.nan)[:, types]
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # a pose without any of those joints
-            return np.nanmean(e, axis=1) / 10
+            return np.nanmean(e, axis=1) / MM_PER_CM
 
     er, ed = per_pose(ref), per_pose(det)
     out = {}
@@ -204,8 +205,8 @@ def main(argv: list[str] | None = None) -> dict:
         "--picture", type=Path, help="draw the frame where the default took most unsure boxes (PNG)"
     )
     p.add_argument("--worst", type=int, default=0, metavar="N",
-                   help="also list, per number of supporting views, the N poses that the default variant answers "
-                   "worst against reference boxes, and their share of its excess")  # fmt: skip
+                   help="also list, per number of supporting views, the N poses that the last of --variants (the "
+                   "served default unless chosen) answers worst against reference boxes, and their share of its excess")  # fmt: skip
     p.add_argument("--single-view", action="store_true",
                    help="also score each reference box's single-view skeleton (the box lifted alone, what the "
                    "skeleton matcher compares): mean error, and the median / 90th percentile of its median joint")  # fmt: skip
