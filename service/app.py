@@ -78,6 +78,20 @@ def _openapi(app: FastAPI) -> dict:
     return app.openapi_schema
 
 
+def tracker_config(settings: Settings) -> TrackerConfig:
+    """The ``ORPOSE_TRACK_*`` settings as every stream's tracker configuration (0 turns a rule off where the
+    setting says so)."""
+    return TrackerConfig(
+        max_spread_mm=settings.track_max_spread_mm,
+        min_torso_mm=settings.track_min_torso_mm,
+        min_height_mm=settings.track_min_height_mm,
+        lying_height_mm=settings.track_lying_height_mm or None,
+        lying_spread_mm=settings.track_lying_spread_mm,
+        unsure_gate_mm=settings.track_unsure_gate_mm or None,
+        max_coast_s=settings.track_max_coast_s,
+    )
+
+
 def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None = None) -> FastAPI:
     """The app; ``pipeline`` (already loaded) skips loading the models from ``settings``' checkpoints."""
     settings = settings or Settings()
@@ -96,14 +110,7 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
     app.state.settings = settings
     app.state.pipeline = pipeline
     app.state.in_flight = InFlightLimiter(settings.max_in_flight)
-    tracker = TrackerConfig(
-        max_spread_mm=settings.track_max_spread_mm,
-        min_torso_mm=settings.track_min_torso_mm,
-        min_height_mm=settings.track_min_height_mm,
-        lying_height_mm=settings.track_lying_height_mm or None,
-        lying_spread_mm=settings.track_lying_spread_mm,
-        unsure_gate_mm=settings.track_unsure_gate_mm or None,
-    )
+    tracker = tracker_config(settings)
     app.state.streams = StreamRegistry(
         settings.max_streams,
         settings.stream_idle_s,

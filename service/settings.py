@@ -155,6 +155,15 @@ class Settings(BaseSettings):
         description="streams: the spread (mm) above which a low new track counts as lying "
         "(ORPOSE_TRACK_LYING_HEIGHT_MM)",
     )
+    # posenet.track.TrackerConfig.max_coast_s: a confirmed track whose person no frame shows coasts this long, and
+    # takes the person back when they reappear near where it predicts them; after it, they get a new id.
+    track_max_coast_s: float = Field(
+        TrackerConfig.max_coast_s,
+        gt=0,
+        le=60,
+        description="streams: seconds a track waits, unseen, for its person to reappear before it ends (longer "
+        "keeps ids across longer occlusions, and risks giving one person's id to another who comes close)",
+    )
     # Scenes without "up": a stream finds the floor in its first frame's depth images (posenet.rig.check.
     # floor_of_frame: within 0.3 degrees of the room frame on rendered MVOR-rig frames, some tens of ms once).
     track_floor_up: bool = Field(

@@ -143,3 +143,21 @@ def test_settings_reach_the_pipeline(monkeypatch):
     monkeypatch.setenv("ORPOSE_FREE_SPACE_MM", "-5")
     with pytest.raises(ValueError, match="free_space_mm"):
         Settings()
+
+
+def test_settings_reach_every_stream_s_tracker(monkeypatch):
+    """ORPOSE_TRACK_* knobs become the streams' tracker config: defaults as posenet.track's, 0 turns the unsure
+    gate off, and a coast outside (0, 60] s is refused."""
+    from posenet.track import TrackerConfig
+    from service.app import tracker_config
+    from service.settings import Settings
+
+    assert tracker_config(Settings()) == TrackerConfig()
+    monkeypatch.setenv("ORPOSE_TRACK_MAX_COAST_S", "5")
+    monkeypatch.setenv("ORPOSE_TRACK_UNSURE_GATE_MM", "0")
+    changed = tracker_config(Settings())
+    assert changed.max_coast_s == 5.0 and changed.unsure_gate_mm is None
+    for bad in ("0", "61"):
+        monkeypatch.setenv("ORPOSE_TRACK_MAX_COAST_S", bad)
+        with pytest.raises(ValueError, match="track_max_coast_s"):
+            Settings()
