@@ -166,7 +166,7 @@ def worst_poses(gt: dict, reference: list[dict], detected: list[dict], days, n: 
 
     def per_pose(m):
         e = np.where(m.valid & m.matched[:, None], m.errors, np.nan)[:, types]
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # a pose without any of those joints
             return np.nanmean(e, axis=1) / MM_PER_CM
 

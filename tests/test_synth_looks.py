@@ -103,8 +103,7 @@ def mvor_frames():
 
 def _frame300_person(ctx) -> np.ndarray:
     """Person 0 of MVOR's frame 300 as a full skeleton ``(NUM_FULL, 3)`` in the twin's world frame (mm)."""
-    kp = ctx.frames[300].poses[0][1]
-    return complete_legs(kp[:, :3] @ ctx.cam0_to_world[:3, :3].T + ctx.cam0_to_world[:3, 3])
+    return complete_legs(ctx.world_points(ctx.frames[300].poses[0][1]))
 
 
 def _views_digest(views) -> str:

@@ -76,6 +76,11 @@ class TwinContext:
         default_factory=dict
     )  # day -> (centre xy, half size)
 
+    def world_points(self, kp: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` world points (z up, mm) of MVOR keypoints ``kp (N, >= 3)`` given in camera 0's frame."""
+        T = self.cam0_to_world
+        return kp[:, :3] @ T[:3, :3].T + T[:3, 3]
+
 
 def _xyxy(b) -> np.ndarray:
     return np.array([b[0], b[1], b[0] + b[2], b[1] + b[3]], float)
@@ -150,9 +155,8 @@ def room_bounds(ctx: TwinContext, day: int, margin: float = 700.0) -> tuple[np.n
 
     The cameras hang on the walls and ceiling; people must stand inside, with ``margin`` mm to spare.
     """
-    T = ctx.cam0_to_world
     pts = [ctx.rig.cam_to_world[:, :3, 3], ctx.tables[day][0][None]]
-    pts += [kp[:, :3] @ T[:3, :3].T + T[:3, 3] for f in ctx.frames if f.day == day for _, kp, _ in f.poses]
+    pts += [ctx.world_points(kp) for f in ctx.frames if f.day == day for _, kp, _ in f.poses]
     pts = np.concatenate(pts)
     lo, hi = pts[:, :2].min(0) - margin, pts[:, :2].max(0) + margin
     cams = ctx.rig.cam_to_world[:, :3, 3]
@@ -309,13 +313,10 @@ def twin_frame(
 
     ``look`` (None: the twin look) dresses every person before the occluders are fitted to their silhouettes,
     then adds its own occluders, which keep off the people that MVOR shows."""
-    T = ctx.cam0_to_world
     persons = []
     for pid, kp, role in info.poses:
-        pts12 = kp[:, :3] @ T[:3, :3].T + T[:3, 3]
-        persons.append(
-            Person(complete_legs(pts12), sample_outfit(rng), pid, role if role == "patient" else "clinician")
-        )
+        persons.append(Person(complete_legs(ctx.world_points(kp)), sample_outfit(rng), pid,
+                              role if role == "patient" else "clinician"))  # fmt: skip
     centre, yaw = ctx.tables[info.day]
     room_xy, half = ctx.rooms[info.day]
     half = half + [*rng.uniform(0, 500, 2), 0]
