@@ -10,7 +10,9 @@ pose network) on every frame of the sequences, caching each frame's persons (joi
 sequence with :class:`posenet.track.Tracker` (persons the detector was unsure of only continue tracks; ``--set
 unsure_gate_mm=none`` ignores them) and prints :func:`posenet.track_eval.evaluate`'s figures (MOTA,
 IDF1, id switches with a 3D gate; per-frame against smoothed MPJPE; acceleration error; per-track bone-length
-standard deviation; the tracker's milliseconds per frame) against issue 15's goals.
+standard deviation; the tracker's milliseconds per frame) against issue 15's goals. Persons in view whom the
+sequence does not annotate (a frame's ``unannotated3D``: renderer 1.2 annotates people as MVOR does) count neither
+way: a track on one of them is left out of that frame, and the count of such track-frames is printed.
 
 With ``--served`` it scores instead what the service answered: the JSON lines of ``python -m service.client DATA
 --track`` (each person's ``track_id``, raw ``joints`` and ``smoothed_joints``; the tracking time is the
@@ -170,6 +172,9 @@ def sequences(
             up=up
             if up is not None or detections is None or detections[mv["id"]].get("up") is None
             else np.asarray(detections[mv["id"]]["up"], float),
+            ignore_joints=np.array(
+                [np.reshape(p["keypoints3D"], (-1, 4))[:10, :3] for p in mv.get("unannotated3D", [])]
+            ).reshape(-1, 10, 3),
         )
         out[mv["sequence"]].append((mv["id"], frame))
     for rows in out.values():
@@ -321,7 +326,10 @@ def main(argv: list[str] | None = None) -> dict:
                     print(f"sequence {seq} track {b['track']}: {b['frames']} frames, {b['near_share']:.0%} near a "
                           f"person; first frames {b['first_height_mm']} mm along up, spread {b['first_spread_mm']} mm")  # fmt: skip
     for seq, figures in report["sequences"].items():
-        print(f"sequence {seq}: {figures['frames']} frames")
+        print(
+            f"sequence {seq}: {figures['frames']} frames, {figures['gt_person_frames']} annotated person-frames; "
+            f"{figures['ignored_track_frames']} track-frames on persons in view but not annotated left out"
+        )
         for line in goal_lines(figures):
             print("  " + line)
     print(

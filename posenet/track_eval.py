@@ -5,7 +5,10 @@ and the ground truth) and :func:`score` measures its tracks, or tracks made else
 
 - **Identities** with ``motmetrics`` (CLEAR MOT and IDF1): a confirmed track and a ground-truth person can match
   when their mean joint distance is at most ``gate_mm`` (3D, mm). MOTA, IDF1, id switches, and switches per 1,000
-  ground-truth person-frames.
+  ground-truth person-frames. Persons in view that the ground truth does not annotate (a frame's
+  ``ignore_joints``: a rendered sequence's ``unannotated3D``, people MVOR's convention leaves box-only) count
+  neither way, as MOTChallenge treats its distractors: a track that the optimal assignment under the gate gives
+  to one of them rather than to an annotated person is left out of that frame.
 - **Per-frame against smoothed MPJPE** (cm), on the same matched pairs: the pipeline's joints as they came, and
   the tracker's.
 - **Acceleration error** (mm/frame^2): the mean over joints of ``|a_pred - a_gt|``, with ``a = x[t+1] - 2 x[t] +
@@ -24,6 +27,7 @@ from collections import defaultdict
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from posenet.skeleton import BONES, NUM_JOINTS
 from posenet.track import Tracker, bone_lengths, mean_joint_distance
@@ -50,7 +54,8 @@ class SequenceFrame:
 
     gt_ids: (G,) person ids; gt_joints: (G, J, 3) mm; joints: (P, J, 3) mm; spread: (P, J) mm; unsure: (P,)
     bool, persons that may only continue a track (``posenet.track.Tracker.update``), or None; up: (3,) the
-    room's up direction in the joints' frame, or None.
+    room's up direction in the joints' frame, or None; ignore_joints: (I, J, 3) mm, persons in view whom the
+    ground truth does not annotate (the module docstring), or None.
     """
 
     timestamp_s: float
@@ -60,6 +65,20 @@ class SequenceFrame:
     spread: np.ndarray
     unsure: np.ndarray | None = None
     up: np.ndarray | None = None
+    ignore_joints: np.ndarray | None = None
+
+
+def _ignored(frame: SequenceFrame, tracks: list, gate_mm: float) -> set:
+    """The ``tracks`` (keys of a frame's ``{track_id: person}``) that the optimal assignment on the mean joint
+    distance, under ``gate_mm``, gives to a person of ``frame.ignore_joints`` rather than to an annotated one."""
+    ignore = frame.ignore_joints
+    if ignore is None or not len(ignore) or not tracks:
+        return set()
+    people = np.concatenate([frame.gt_joints.reshape(-1, NUM_JOINTS, 3), ignore.reshape(-1, NUM_JOINTS, 3)])
+    dist = mean_joint_distance(people, np.array([p.joints for p in tracks.values()]))  # (G + I, H)
+    rows, cols = linear_sum_assignment(np.where(dist <= gate_mm, dist, 1e9))
+    keys, annotated = list(tracks), len(frame.gt_ids)
+    return {keys[h] for g, h in zip(rows, cols, strict=True) if dist[g, h] <= gate_mm and g >= annotated}
 
 
 def _bone_std(lengths: dict) -> tuple[list[float], float]:
@@ -125,7 +144,11 @@ def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_m
     if len(hyps) != len(frames):
         raise ValueError(f"{len(hyps)} frames of tracks for {len(frames)} frames of ground truth")
     acc = mm.MOTAccumulator(auto_id=True)
+    ignored = 0
     for fr, hyp in zip(frames, hyps, strict=True):
+        left_out = _ignored(fr, hyp, gate_mm)
+        ignored += len(left_out)
+        hyp = {t: p for t, p in hyp.items() if t not in left_out}
         confirmed = list(hyp.values())
         smoothed = np.array([p.joints for p in confirmed]).reshape(len(confirmed), NUM_JOINTS, 3)
         dist = mean_joint_distance(fr.gt_joints.reshape(-1, NUM_JOINTS, 3), smoothed)  # (G, H)
@@ -168,6 +191,7 @@ def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_m
         "id_switches": int(row["num_switches"]),
         "switches_per_1000": round(1000 * int(row["num_switches"]) / max(objects, 1), 2),
         "false_positives": int(row["num_false_positives"]),
+        "ignored_track_frames": ignored,  # tracks on persons in view that the ground truth does not annotate
         "misses": int(row["num_misses"]),
         "mpjpe_per_frame_cm": round(mpjpe_raw, 2),
         "mpjpe_smoothed_cm": round(mpjpe_smooth, 2),

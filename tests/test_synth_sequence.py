@@ -104,3 +104,40 @@ def test_a_second_sequence_in_one_process_is_its_own(tmp_path):
     assert main(["--out", str(tmp_path / "b"), "--frames", "4", *args])["frames"] == 4
     fresh = json.loads((tmp_path / "b" / "annotations.json").read_text())
     assert [m["frame_index"] for m in fresh["multiview_images"]] == [0, 1, 2, 3]
+
+
+def test_persons_barely_in_view_are_box_only_as_in_mvor(tmp_path):
+    # Real MVOR gives a box a person id (2D keypoints, and the person a 3D pose) only when >= 5 of the 10 joints
+    # are in the image and >= 4 visible. --annotate all (the renderer before version 1.2) annotated every box.
+    args = ["--sequence", "--frames", "6", "--persons", "4", "--views", "2", "--fps", "2", "--seed", "10", "--quiet"]  # fmt: skip
+    main(["--out", str(tmp_path / "mvor"), *args])
+    main(["--out", str(tmp_path / "all"), *args, "--annotate", "all"])
+    mvor, every = (json.loads((tmp_path / k / "annotations.json").read_text()) for k in ("mvor", "all"))
+    assert [a["bbox"] for a in mvor["annotations"]] == [a["bbox"] for a in every["annotations"]]  # same boxes
+    for png in (tmp_path / "all").rglob("*.png"):  # and the same images
+        assert png.read_bytes() == (tmp_path / "mvor" / png.relative_to(tmp_path / "all")).read_bytes()
+    frame_of = {im["id"]: m["id"] for m in mvor["multiview_images"] for im in m["images"]}
+    labelled, only_box = set(), set()
+    for a, b in zip(mvor["annotations"], every["annotations"], strict=True):
+        flags = np.reshape(a["keypoints"], (10, 3))[:, 2]
+        if a["person_id"] >= 0:
+            assert (flags > 0).sum() >= 5 and (flags == 2).sum() >= 4 and a["only_bbox"] == 0
+            assert a["person_id"] == b["person_id"] and a["keypoints"] == b["keypoints"]
+            labelled.add((frame_of[a["image_id"]], a["person_id"]))
+        elif b["person_id"] >= 0:  # annotated before, now box-only: too little of the person in view
+            flags = np.reshape(b["keypoints"], (10, 3))[:, 2]
+            assert (flags > 0).sum() < 5 or (flags == 2).sum() < 4
+            assert a["only_bbox"] == 1 and not any(a["keypoints"])
+            only_box.add((frame_of[a["image_id"]], b["person_id"]))
+    assert only_box  # the seed holds such boxes
+    poses = {(p["image_ids"], p["person_id"]) for p in mvor["annotations3D"]}
+    assert poses == labelled  # a 3D pose exactly where some view annotates the person
+    ignored = {(m["id"], p["person_id"]) for m in mvor["multiview_images"] for p in m["unannotated3D"]}
+    assert ignored and ignored == only_box - labelled  # boxed persons without a 3D pose, for the evaluation
+    before = {(p["image_ids"], p["person_id"]): p["keypoints3D"] for p in every["annotations3D"]}
+    assert poses | ignored == set(before)
+    for m in mvor["multiview_images"]:
+        for p in m["unannotated3D"]:
+            kept = np.reshape(before[(m["id"], p["person_id"])], (-1, 4))[:, :3]
+            assert np.allclose(np.reshape(p["keypoints3D"], (-1, 4))[:, :3], kept, atol=1e-3)
+    assert all("unannotated3D" not in m for m in every["multiview_images"])

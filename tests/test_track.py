@@ -397,6 +397,25 @@ def test_evaluation_scores_a_clean_run_and_counts_a_swap():
     assert evaluate(swapped, Tracker())["id_switches"] == 2
 
 
+def test_tracks_on_persons_the_ground_truth_leaves_unannotated_count_neither_way():
+    # Person 1 is in view but not annotated (a rendered sequence's unannotated3D: too little of them in the image
+    # for MVOR's annotators): their track is no false positive, and an annotated person's track still matches.
+    frames = noisy_frames(40, seed=3)
+    hidden = [SequenceFrame(fr.timestamp_s, fr.gt_ids[:1], fr.gt_joints[:1], fr.joints, fr.spread,
+                            ignore_joints=fr.gt_joints[1:]) for fr in frames]  # fmt: skip
+    plain = [
+        SequenceFrame(fr.timestamp_s, fr.gt_ids[:1], fr.gt_joints[:1], fr.joints, fr.spread) for fr in frames
+    ]
+    ignored, counted = evaluate(hidden, Tracker()), evaluate(plain, Tracker())
+    assert counted["false_positives"] > 30 and counted["ignored_track_frames"] == 0
+    assert ignored["false_positives"] == 0 and ignored["ignored_track_frames"] == counted["false_positives"]
+    assert ignored["idf1"] > 0.95 > counted["idf1"] and ignored["gt_person_frames"] == 40
+    # A track nearer the annotated person than the ignored one is still that person's match: swap the roles.
+    crossed = [SequenceFrame(fr.timestamp_s, fr.gt_ids[1:], fr.gt_joints[1:], fr.joints, fr.spread,
+                             ignore_joints=fr.gt_joints[:1]) for fr in frames]  # fmt: skip
+    assert evaluate(crossed, Tracker())["misses"] == evaluate(hidden, Tracker())["misses"]
+
+
 def test_tracks_made_elsewhere_score_as_the_tracker_s_own():
     # benchmarks/tracking.py --served scores a stream's answers (track ids, raw and smoothed joints) with
     # track_eval.score: the same tracks, passed as TrackedPerson, give the same figures as evaluate().

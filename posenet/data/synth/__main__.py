@@ -22,7 +22,13 @@ from dataclasses import asdict
 from pathlib import Path
 
 from posenet.data.synth.looks import BODY_PARTS, DRAWN_GOWN_SHARE, GRAMMAR_SHARE, LOOKS, PARTS
-from posenet.data.synth.writer import SynthConfig, generate
+from posenet.data.synth.writer import (
+    ANNOTATIONS,
+    MIN_KEYPOINTS_IN_IMAGE,
+    MIN_KEYPOINTS_VISIBLE,
+    SynthConfig,
+    generate,
+)
 
 DEFAULT_MVOR = Path(__file__).resolve().parents[3] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
 
@@ -126,6 +132,15 @@ def build_parser() -> argparse.ArgumentParser:
         "of drawn height, flare and length, whatever builds their body; the rest wear their body model's own "
         f"skirt (default {DRAWN_GOWN_SHARE}: as before)",
     )
+    p.add_argument(
+        "--annotate",
+        choices=ANNOTATIONS,
+        default="mvor",
+        help="procedural scenes and sequences: mvor (default) annotates a boxed person in a view as MVOR's "
+        f"annotators did, only with at least {MIN_KEYPOINTS_IN_IMAGE} of the 10 joints in the image and "
+        f"{MIN_KEYPOINTS_VISIBLE} visible (else a box-only person there, and without such a view no 3D pose); "
+        "all annotates every boxed person (the files of renderer version 1.1). The twin follows MVOR's own boxes",
+    )
     p.add_argument("--workers", type=int, default=1, help="frames rendered in parallel processes")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
@@ -162,6 +177,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
         look_parts=args.look_parts,
         grammar_share=args.grammar_share,
         drawn_gowns=args.drawn_gowns,
+        annotate=args.annotate,
     )
     if args.sequence:
         return SynthConfig(

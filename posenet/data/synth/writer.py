@@ -48,9 +48,19 @@ from posenet.data.synth.skeleton_full import NUM_MVOR_POINTS
 from posenet.data.synth.twin import TwinContext, load_twin, twin_frame
 from posenet.skeleton import BONES, JOINTS
 
-VERSION = "1.1"  # 1.1: looks (the twin look renders exactly what 1.0 rendered); sequences are a new mode
+VERSION = "1.2"  # 1.1: looks (the twin look renders exactly what 1.0 rendered); sequences are a new mode
+# 1.2: procedural scenes and sequences annotate a person in a view by MVOR's convention (ANNOTATIONS); images unchanged
 MODE_CODES = {"procedural": 1, "twin": 2, "sequence": 3}
 SEQUENCE_KEYS = ("frames", "fps", "persons")  # settings that only sequences have
+# Which boxed persons carry their id, 2D keypoints and 3D pose (``--annotate``). "mvor": MVOR's convention, as its
+# real file shows it: each of its 2,926 boxes with a person id has at least MIN_KEYPOINTS_IN_IMAGE of the 10 joints
+# annotated (flag > 0) and at least MIN_KEYPOINTS_VISIBLE visible (flag 2); a person less in view, e.g. a hand and a
+# shoe at the image's edge, is a box-only person there (``only_bbox`` 1, ``person_id`` -1), and a person with no such
+# box in any view gets no 3D pose in that frame (a sequence lists it under ``unannotated3D``). "all": every boxed
+# person is annotated (the renderer's convention before version 1.2). The twin takes MVOR's own boxes and ids.
+ANNOTATIONS = ("mvor", "all")
+MIN_KEYPOINTS_IN_IMAGE = 5
+MIN_KEYPOINTS_VISIBLE = 4
 # MVOR's category block, 1-based bones as in the real file.
 CATEGORIES = [
     {
@@ -84,6 +94,7 @@ class SynthConfig:
     look_parts: list[str] | None = None
     grammar_share: float = GRAMMAR_SHARE  # random look: share of bodies built by the body grammar
     drawn_gowns: float = DRAWN_GOWN_SHARE  # random look: share of bodies with a gown of a drawn cut
+    annotate: str = "mvor"  # procedural and sequence: which boxed persons are annotated (ANNOTATIONS)
     frames: int = 60  # sequence: frames per sequence
     fps: float = 15.0  # sequence: frame rate (the frames' timestamp_s)
     persons: int = 3  # sequence: clinicians in the sequence (not all in the room all the time)
@@ -109,6 +120,13 @@ class JobResult:
     seconds: float
     stats: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)  # further keys of the multi-view entry (sequences)
+
+
+def mvor_annotates(keypoints: np.ndarray) -> bool:
+    """Whether MVOR's annotators would have given a person these 2D ``keypoints (10, 3)`` (u, v, flag) in a view: at
+    least MIN_KEYPOINTS_IN_IMAGE in the image and MIN_KEYPOINTS_VISIBLE visible (ANNOTATIONS)."""
+    flags = np.asarray(keypoints)[:, 2]
+    return bool((flags > 0).sum() >= MIN_KEYPOINTS_IN_IMAGE and (flags == 2).sum() >= MIN_KEYPOINTS_VISIBLE)
 
 
 def image_id(day: int, cam: int, frame: int) -> int:
@@ -277,6 +295,7 @@ def render_job(job: Job) -> JobResult:
     world_to_ref = np.linalg.inv(rigs.ref_to_world[job.day])
     images, boxes = [], []
     support = np.zeros(len(frame.persons), int)
+    boxed = np.zeros(len(frame.persons), bool)
     seen = np.zeros((len(frame.persons), NUM_MVOR_POINTS), bool)
     for k, vr in enumerate(views):
         cam = rigs.cam_numbers[job.day][k]
@@ -307,7 +326,10 @@ def render_job(job: Job) -> JobResult:
             b = vr.boxes[i]
             if b is None:
                 continue
-            annotated = person.person_id >= 0
+            boxed[i] = True
+            annotated = person.person_id >= 0 and (
+                cfg.mode == "twin" or cfg.annotate == "all" or mvor_annotates(vr.keypoints[i])
+            )
             kp = vr.keypoints[i] if annotated else np.zeros((10, 3))
             if annotated:
                 support[i] += 1
@@ -321,12 +343,16 @@ def render_job(job: Job) -> JobResult:
                     "bbox": [b[0], b[1], b[2] - b[0] + 1, b[3] - b[1] + 1],
                     "only_bbox": int(not annotated),
                     "face_blurred": 0,
-                    "person_id": person.person_id,
+                    "person_id": person.person_id if annotated else -1,
                 }
             )
     mv_id = "_".join(str(im["id"]) for im in images)
-    poses = []
+    poses, unannotated = [], []
     for i, person in enumerate(frame.persons):
+        if person.person_id >= 0 and boxed[i] and support[i] == 0 and cfg.mode == "sequence":
+            pts = person.points[:NUM_MVOR_POINTS] @ world_to_ref[:3, :3].T + world_to_ref[:3, 3]
+            flat = np.concatenate([pts, np.ones((len(pts), 1))], 1).round(3).ravel().tolist()
+            unannotated.append({"ref_camera": 0, "person_id": person.person_id, "keypoints3D": flat})
         if person.person_id < 0 or (support[i] == 0 and cfg.mode != "twin"):
             continue  # the twin keeps every real pose, even one its own boxes miss (MVOR reuses ids)
         if cfg.mode == "twin":
@@ -344,6 +370,8 @@ def render_job(job: Job) -> JobResult:
     extra = {}
     if cfg.mode == "sequence":
         extra = {"sequence": job.day, "frame_index": job.frame, "timestamp_s": round(job.frame / cfg.fps, 6)}
+        if cfg.annotate != "all":  # boxed persons MVOR would not annotate: what a tracker evaluation ignores
+            extra["unannotated3D"] = unannotated
     return JobResult(job.day, job.frame, images, boxes, poses, time.perf_counter() - t0, stats, extra)
 
 
@@ -371,6 +399,8 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
         raise ValueError(f"unknown mode {cfg.mode!r}; expected one of {tuple(MODE_CODES)}")
     if cfg.look not in LOOKS:
         raise ValueError(f"unknown look {cfg.look!r}; expected one of {LOOKS}")
+    if cfg.annotate not in ANNOTATIONS:
+        raise ValueError(f"unknown annotate {cfg.annotate!r}; expected one of {ANNOTATIONS}")
     parse_parts(cfg.look_parts)  # clear errors before any frame is rendered
     check_share(cfg.grammar_share)
     check_share(cfg.drawn_gowns, "drawn_gowns")
