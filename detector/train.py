@@ -275,7 +275,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="last backbone stage used (RT-DETR reads it and the two before it)",
     )
     g.add_argument("--queries", type=int, help="number of DETR queries")
-    g.add_argument("--input-width", type=int, help="images are resized to this width")
+    g.add_argument(
+        "--input-width",
+        type=int,
+        help="images are resized to this width (with --init: fine-tune the checkpoint at this width)",
+    )
     g = p.add_argument_group("training (defaults come from the preset)")
     g.add_argument("--epochs", type=int)
     g.add_argument("--batch-size", type=int)
@@ -369,20 +373,15 @@ def main(argv: list[str] | None = None) -> list[dict]:
         trained_on = saved_trained_on(meta)
         det_cfg.extra.pop("trained_on", None)  # (where runs from before the shared layout kept it)
     elif args.init:
-        if (
-            args.pretrained
-            or args.arch
-            or args.backbone
-            or args.queries
-            or args.input
-            or args.input_width
-            or args.backbone_stage
-        ):
+        if args.pretrained or args.arch or args.backbone or args.queries or args.input or args.backbone_stage:
             raise ValueError(
                 "--init takes the architecture and input of its checkpoint; drop --pretrained, --arch, "
-                "--backbone, --backbone-stage, --queries, --input and --input-width"
+                "--backbone, --backbone-stage, --queries and --input"
             )
         model, det_cfg, meta = load_checkpoint(args.init)
+        # the networks are resolution-free (sine position codes): --input-width fine-tunes at another width
+        if args.input_width:
+            det_cfg = replace(det_cfg, input_width=args.input_width)
         model.float().train()
         trained_on = {"init": str(args.init), "init_trained_on": saved_trained_on(meta), **trained_on}
         det_cfg.extra.pop("trained_on", None)

@@ -180,6 +180,15 @@ def test_cli_checkpoint_gives_identical_predictions(dataset, tmp_path):
         np.testing.assert_allclose(alone.boxes, det.boxes, atol=1e-4)
         np.testing.assert_allclose(alone.scores, det.scores, atol=1e-5)
 
+    # --init at another input width: the same network (resolution-free), fine-tuned on views resized to it.
+    wider = tmp_path / "wider"
+    common = [*argv[:6], "--epochs", "1", "--batch-size", "2", "--no-progress", "--init", str(run)]
+    train_cli.main([*common, "--input-width", str(W + 32), "--out", str(wider)])
+    assert json.loads((wider / "config.json").read_text())["model"]["input_width"] == W + 32
+    assert PersonDetector.from_checkpoint(wider).cfg.input_width == W + 32
+    with pytest.raises(ValueError, match="--init takes the architecture"):
+        train_cli.main([*common, "--queries", "8", "--out", str(tmp_path / "refused")])
+
 
 def test_pretrained_folder_gets_a_person_head(tmp_path):
     """A DETR saved with save_pretrained, with 5 labels, loads with a 1-class head and keeps its other
