@@ -197,6 +197,7 @@ def main(argv: list[str] | None = None) -> dict:
                    help="pose weights (NAME.safetensors with NAME.json, or a run folder; default: the shipped ones)")  # fmt: skip
     p.add_argument("--flip-test", action=argparse.BooleanOptionalAction, default=None,
                    help="average the pose network with the mirrored inputs (default: the checkpoint's setting)")  # fmt: skip
+    p.add_argument("--detector-checkpoint", type=Path, help="detector weights (default: the shipped ones)")
     p.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
     p.add_argument("--json", type=Path, help="also write the results here")
     p.add_argument("--predictions", type=Path,
@@ -214,8 +215,9 @@ def main(argv: list[str] | None = None) -> dict:
     gt = load_annotations(args.annotations or args.data / "annotations.json")
     days = args.days or sorted({image_day(mv["images"][0]) for mv in gt["multiview_images"]})
     pipe = ScenePipeline.from_checkpoints(
-        args.pose_checkpoint, backend="auto", threads=args.threads, flip_test=args.flip_test
-    )
+        args.pose_checkpoint, args.detector_checkpoint, backend="auto", threads=args.threads,
+        flip_test=args.flip_test,
+    )  # fmt: skip
     # The views as the service decodes them (at the networks' read size, tests/test_parity.py): the detector then
     # sees the pixels it sees when served, and the figures are the served ones.
     ds = read_dataset(args.data, gt, pipe.read_size, days)

@@ -41,7 +41,9 @@ from posenet.track import Tracker, TrackerConfig, mean_joint_distance, skeleton_
 from posenet.track_eval import GATE_MM, GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
 
 
-def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -> None:
+def detect(
+    data: Path, gt: dict, out: Path, backend: str, threads: int | None, detector: Path | None = None
+) -> None:
     """Run the pipeline in detector mode on every frame of ``data`` and write one JSON line per frame."""
     from posenet.predict import read_dataset
     from posenet.scene import views_of
@@ -50,7 +52,7 @@ def detect(data: Path, gt: dict, out: Path, backend: str, threads: int | None) -
     from service.streams import Stream, find_up
     from service.validation import ValidatedScene
 
-    pipe = ScenePipeline.from_checkpoints(backend=backend, threads=threads)
+    pipe = ScenePipeline.from_checkpoints(detector_checkpoint=detector, backend=backend, threads=threads)
     # The views as the service decodes them (tests/test_parity.py): the persons equal the served ones.
     ds = read_dataset(data, gt, pipe.read_size)
     # Without a room frame in the file, the room's up comes from the floor, looked for as a stream does it (once
@@ -276,6 +278,9 @@ def main(argv: list[str] | None = None) -> dict:
         "torch, openvino, onnxruntime)",
     )
     p.add_argument("--threads", type=int, default=None, help="the runtimes' intra-op threads")
+    p.add_argument(
+        "--detector-checkpoint", type=Path, help="the pipeline's detector (default: the shipped weights)"
+    )
     p.add_argument("--json", type=Path, help="also write the figures here")
     p.add_argument("--births", action="store_true",
                    help="also list each confirmed track's first frames (median height along up and spread, the "
@@ -312,7 +317,7 @@ def main(argv: list[str] | None = None) -> dict:
             report["sequences"][seq] = score([f for _, f in rows], list(hyps), list(ms))
     else:
         if args.redetect or not args.detections.is_file():
-            detect(args.data, gt, args.detections, args.backend, args.threads)
+            detect(args.data, gt, args.detections, args.backend, args.threads, args.detector_checkpoint)
         with open(args.detections) as f:
             detections = {r["id"]: r for r in map(json.loads, f)}
         report["source"] = f"offline: {args.detections}"
