@@ -68,9 +68,10 @@ class SequenceFrame:
     ignore_joints: np.ndarray | None = None
 
 
-def _ignored(frame: SequenceFrame, tracks: list, gate_mm: float) -> set:
-    """The ``tracks`` (keys of a frame's ``{track_id: person}``) that the optimal assignment on the mean joint
-    distance, under ``gate_mm``, gives to a person of ``frame.ignore_joints`` rather than to an annotated one."""
+def _ignored(frame: SequenceFrame, tracks: dict, gate_mm: float) -> set:
+    """The track ids of a frame's ``tracks`` (``{track_id: person}``) that the optimal assignment on the mean joint
+    distance to their smoothed joints, under ``gate_mm``, gives to a person of ``frame.ignore_joints`` rather than
+    to an annotated one."""
     ignore = frame.ignore_joints
     if ignore is None or not len(ignore) or not tracks:
         return set()
