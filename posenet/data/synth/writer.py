@@ -349,11 +349,8 @@ def render_job(job: Job) -> JobResult:
     mv_id = "_".join(str(im["id"]) for im in images)
     poses, unannotated = [], []
     for i, person in enumerate(frame.persons):
-        if person.person_id >= 0 and boxed[i] and support[i] == 0 and cfg.mode == "sequence":
-            pts = person.points[:NUM_MVOR_POINTS] @ world_to_ref[:3, :3].T + world_to_ref[:3, 3]
-            flat = np.concatenate([pts, np.ones((len(pts), 1))], 1).round(3).ravel().tolist()
-            unannotated.append({"ref_camera": 0, "person_id": person.person_id, "keypoints3D": flat})
-        if person.person_id < 0 or (support[i] == 0 and cfg.mode != "twin"):
+        listed = cfg.mode == "sequence" and boxed[i]  # boxed, if annotated in no view: in unannotated3D
+        if person.person_id < 0 or not (support[i] or listed or cfg.mode == "twin"):
             continue  # the twin keeps every real pose, even one its own boxes miss (MVOR reuses ids)
         if cfg.mode == "twin":
             # the frame's first persons are its real poses, in order (twin_frame; ids made unique there)
@@ -363,9 +360,12 @@ def render_job(job: Job) -> JobResult:
             seen[i, 10], seen[i, 11] = seen[i, 8], seen[i, 9]  # hands follow the wrists
             flags = np.where(seen[i], 2.0, 1.0)
             flat = np.concatenate([pts, flags[:, None]], 1).round(3).ravel().tolist()
-        poses.append(
-            {"ref_camera": 0, "person_id": person.person_id, "image_ids": mv_id, "keypoints3D": flat}
-        )
+        if support[i] or cfg.mode == "twin":
+            poses.append(
+                {"ref_camera": 0, "person_id": person.person_id, "image_ids": mv_id, "keypoints3D": flat}
+            )
+        else:
+            unannotated.append({"ref_camera": 0, "person_id": person.person_id, "keypoints3D": flat})
     stats = dict(stats, support=[int(s) for s in support if s > 0])
     extra = {}
     if cfg.mode == "sequence":
