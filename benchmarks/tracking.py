@@ -32,13 +32,21 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 from tqdm import tqdm
 
 from posenet.data.mvor import load_annotations, room_up
 from posenet.execution import machine_line
 from posenet.track import Tracker, TrackerConfig, mean_joint_distance, skeleton_height
-from posenet.track_eval import GATE_MM, GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
+from posenet.track_eval import (
+    GATE_MM,
+    GOALS,
+    SequenceFrame,
+    TrackedPerson,
+    evaluate,
+    gated_pairs,
+    goal_lines,
+    score,
+)
 
 
 def detect(
@@ -217,12 +225,7 @@ def served_pairs(
 ) -> list[tuple]:
     """One frame's (ground-truth index, track id) pairs: the optimal assignment on the mean joint distance between
     the ground truth and the tracks' smoothed joints, pairs beyond ``gate_mm`` left out (``track_eval``'s gate)."""
-    if not tracks or not len(frame.gt_ids):
-        return []
-    ids = list(tracks)
-    dist = mean_joint_distance(frame.gt_joints, np.array([tracks[t].joints for t in ids]))  # (G, T)
-    rows, cols = linear_sum_assignment(np.where(dist <= gate_mm, dist, 1e9))
-    return [(int(g), ids[t]) for g, t in zip(rows, cols, strict=True) if dist[g, t] <= gate_mm]
+    return gated_pairs(frame.gt_joints, tracks, gate_mm)
 
 
 def births(frames: list[SequenceFrame], tracker: Tracker, near_mm: float = 500.0) -> list[dict]:

@@ -68,18 +68,27 @@ class SequenceFrame:
     ignore_joints: np.ndarray | None = None
 
 
+def gated_pairs(people: np.ndarray, tracks: dict, gate_mm: float = GATE_MM) -> list[tuple[int, int]]:
+    """``(person index, track id)`` pairs of the optimal assignment on the mean joint distance between ``people
+    (G, J, 3)`` and the smoothed joints of ``tracks`` (``{track_id: person}``), pairs beyond ``gate_mm`` left out:
+    the evaluation's gate."""
+    people = np.asarray(people, float).reshape(-1, NUM_JOINTS, 3)
+    if not tracks or not len(people):
+        return []
+    ids = list(tracks)
+    dist = mean_joint_distance(people, np.array([tracks[t].joints for t in ids]))  # (G, T)
+    rows, cols = linear_sum_assignment(np.where(dist <= gate_mm, dist, 1e9))
+    return [(int(g), ids[t]) for g, t in zip(rows, cols, strict=True) if dist[g, t] <= gate_mm]
+
+
 def _ignored(frame: SequenceFrame, tracks: dict, gate_mm: float) -> set:
-    """The track ids of a frame's ``tracks`` (``{track_id: person}``) that the optimal assignment on the mean joint
-    distance to their smoothed joints, under ``gate_mm``, gives to a person of ``frame.ignore_joints`` rather than
-    to an annotated one."""
+    """The track ids of a frame's ``tracks`` (``{track_id: person}``) that :func:`gated_pairs` gives to a person of
+    ``frame.ignore_joints`` rather than to an annotated one."""
     ignore = frame.ignore_joints
-    if ignore is None or not len(ignore) or not tracks:
+    if ignore is None or not len(ignore):
         return set()
     people = np.concatenate([frame.gt_joints.reshape(-1, NUM_JOINTS, 3), ignore.reshape(-1, NUM_JOINTS, 3)])
-    dist = mean_joint_distance(people, np.array([p.joints for p in tracks.values()]))  # (G + I, H)
-    rows, cols = linear_sum_assignment(np.where(dist <= gate_mm, dist, 1e9))
-    keys, annotated = list(tracks), len(frame.gt_ids)
-    return {keys[h] for g, h in zip(rows, cols, strict=True) if dist[g, h] <= gate_mm and g >= annotated}
+    return {t for g, t in gated_pairs(people, tracks, gate_mm) if g >= len(frame.gt_ids)}
 
 
 def _bone_std(lengths: dict) -> tuple[list[float], float]:

@@ -106,8 +106,8 @@ class Settings(BaseSettings):
     max_boxes_per_view: int = Field(64, ge=1, description="most reference boxes in one view")
     # Streams (POST /streams/{id}/frames): each holds a tracker (a few KB per person) and answers its frames one
     # at a time. The bound keeps forgotten streams from piling up; the idle time frees the place of a client that
-    # left without DELETE. A tracker ends every track after 2.5 s unseen anyway, so a stream idle for a minute
-    # has nothing left worth keeping.
+    # left without DELETE. A tracker ends every track after track_max_coast_s unseen anyway (2.5 s by default, at
+    # most 60), so a stream idle for a minute has nothing left worth keeping.
     max_streams: int = Field(
         16, ge=1, le=4096, description="streams held at once (a new stream beyond it: 503 with Retry-After)"
     )
