@@ -18,8 +18,10 @@ setting), and in detector mode once per variant of the skeleton matcher:
 The detector runs once per frame (at the lowest score any variant reads); the variants then run one after
 another on the same frame, so that a loaded machine slows them alike. Prints per variant the MVOR per-support
 average (shoulders, hips, elbows, wrists) at 1 / 2 / 3 views and the overall MPJPE (10 joints, cm;
-``posenet.evaluate``), the ratio to the reference boxes, the persons returned that overlap no annotated
-person (``nobody``: false persons, or persons MVOR did not annotate, such as the patient), and the median / p95
+``posenet.evaluate``), the ratio to the reference boxes, the annotated poses that no returned person was
+matched to (``missed``; persons are matched by ``posenet.boxes.ground_truth_ids``, the paper's mean IoU over the
+views, with MVOR's box-only people competing), the persons returned that are no annotated person (``nobody``:
+false persons, or persons MVOR boxed without a pose, such as the patient), and the median / p95
 milliseconds of the matcher
 (``match``: lifting each box alone, grouping, fusing) and of the U-Net (``pose``).
 
@@ -265,6 +267,7 @@ def main(argv: list[str] | None = None) -> dict:
         rows[name] = {
             "support": {k: v.get("average") for k, v in r["per_support"].items()},
             "poses": {k: v.get("count") for k, v in r["per_support"].items()},
+            "missing": {k: v.get("missing") for k, v in r["per_support"].items()},
             "overall": r["overall"],
         }
         if name in times:
@@ -274,9 +277,9 @@ def main(argv: list[str] | None = None) -> dict:
             }
     ref = rows["reference"]["support"]
     print(f"{args.data} days {days}; {machine_line()}")
-    print("| boxes | 1 view | 2 views | 3 views | overall | ratio to reference (1 / 2 / 3) | nobody | "
-          "match ms (median / p95) | pose ms |")  # fmt: skip
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| boxes | 1 view | 2 views | 3 views | overall | ratio to reference (1 / 2 / 3) | missed (1 / 2 / 3) | "
+          "nobody | match ms (median / p95) | pose ms |")  # fmt: skip
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name, row in rows.items():
         sup = [row["support"].get(k) for k in ("1", "2", "3")]
         cells = " | ".join("-" if v is None else f"{v:.2f}" for v in sup)
@@ -288,8 +291,9 @@ def main(argv: list[str] | None = None) -> dict:
             if ms is None
             else f"{ms['match'][0]:.1f} / {ms['match'][1]:.1f} | {ms['pose'][0]:.1f} / {ms['pose'][1]:.1f}"
         )
+        missed = " / ".join(str(row["missing"].get(k, 0) or 0) for k in ("1", "2", "3"))
         print(
-            f"| {name} | {cells} | {row['overall']:.2f} | {ratio if name != 'reference' else ''} | "
+            f"| {name} | {cells} | {row['overall']:.2f} | {ratio if name != 'reference' else ''} | {missed} | "
             f"{row.get('nobody', '')} | {timing or ' | '} |"
         )
     if alone:
@@ -306,9 +310,11 @@ def main(argv: list[str] | None = None) -> dict:
         found = worst_poses(gt, preds["reference"], preds[last], days, args.worst)
         rows[last]["worst"] = found
         for s, w in found.items():
+            share = w["share_of_worst"]
+            held = f"{100 * share:.0f} % of the excess" if np.isfinite(share) else "no excess (none in all)"
             print(
-                f"{last}, {s} view(s): the {len(w['worst'])} poses that lose most hold "
-                f"{100 * w['share_of_worst']:.0f} % of the excess ({w['excess_cm']:.1f} cm over {w['poses']} poses)"
+                f"{last}, {s} view(s): the {len(w['worst'])} poses that lose most hold {held} "
+                f"({w['excess_cm']:.1f} cm over {w['poses']} poses)"
             )
             for q in w["worst"]:
                 print(

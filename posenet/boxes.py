@@ -270,12 +270,21 @@ def assign(
 def ground_truth_ids(sample, pred_boxes: Sequence[Sequence[Sequence[float] | None]]) -> list[int | None]:
     """The ground-truth person id of each predicted person of ``sample`` (None where none overlaps enough).
 
+    The paper's protocol: predicted persons are matched to the annotated ones by their IoU averaged over the
+    views (0 where either has no box; :func:`assign`). The boxes MVOR annotates without an identity (``person_id``
+    -1: people it boxed but gave no pose, such as the patient or someone barely in view) compete as well, each
+    as a person of its one view, so a predicted person who overlaps one of them best is that person (None here)
+    and is not scored against an annotated neighbour it barely overlaps (MOTChallenge's distractors; on the
+    alt look's day 4, frame 44: one annotated person, seen from the hips down, among four box-only ones).
+
     Args:
         sample: the annotated frame (a ``posenet.data.sample.Sample``); its persons are :func:`person_ids`.
         pred_boxes: P persons, each V entries: an xyxy box or None.
     """
-    boxes = [v.boxes for v in sample.views]
-    ids = [v.box_person_ids for v in sample.views]
+    boxes = [np.asarray(v.boxes, np.float64).reshape(-1, 4) for v in sample.views]
+    ids = [np.asarray(v.box_person_ids).reshape(-1) for v in sample.views]
     gt_ids = person_ids(ids)
-    matches = assign(pred_boxes, [boxes_of_person(boxes, ids, pid) for pid in gt_ids])
-    return [None if g is None else gt_ids[g] for g in matches]
+    V = len(boxes)
+    box_only = [[b if u == v else None for u in range(V)] for v in range(V) for b in boxes[v][ids[v] < 0]]
+    matches = assign(pred_boxes, [boxes_of_person(boxes, ids, pid) for pid in gt_ids] + box_only)
+    return [None if g is None or g >= len(gt_ids) else gt_ids[g] for g in matches]

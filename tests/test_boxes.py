@@ -134,6 +134,25 @@ def test_persons_are_the_boxes_with_an_identity():
     assert dense.shape == (1, 3, 4) and np.isnan(dense[0, 2]).all() and not np.isnan(dense[0, :2]).any()
 
 
+def test_predicted_persons_take_the_identity_they_overlap_best_box_only_people_included():
+    from types import SimpleNamespace
+
+    # View 0: person 4 (annotated) beside someone MVOR boxed without an identity (-1); view 1: person 4 alone.
+    a, other = [100.0, 50, 160, 240], [130.0, 40, 210, 240]
+    view0 = SimpleNamespace(boxes=np.array([a, other]), box_person_ids=np.array([4, -1]))
+    view1 = SimpleNamespace(boxes=np.array([[10.0, 10, 60, 200]]), box_person_ids=np.array([4]))
+    sample = SimpleNamespace(views=[view0, view1])
+    on_other = [[128.0, 45, 208, 238], None]  # the box-only person, seen in view 0: overlaps person 4 too
+    assert B.mean_view_iou(B.dense_boxes([on_other], 2), B.dense_boxes([[a, view1.boxes[0]]], 2))[0, 0] > 0.1
+    on_a = [[102.0, 52, 158, 238], [12.0, 11, 61, 199]]
+    far = [[0.0, 0, 5, 5], None]
+    assert B.ground_truth_ids(sample, [on_other, on_a, far]) == [None, 4, None]
+    # Alone, the one who overlaps person 4 a little is still scored against it, as the paper's rule says.
+    assert B.ground_truth_ids(sample, [on_other]) == [None]
+    alone = SimpleNamespace(views=[SimpleNamespace(boxes=np.array([a]), box_person_ids=np.array([4])), view1])
+    assert B.ground_truth_ids(alone, [on_other]) == [4]
+
+
 def test_box_coverage_is_the_covered_fraction_of_the_second_box():
     from posenet.boxes import box_coverage
 

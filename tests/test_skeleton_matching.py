@@ -344,6 +344,37 @@ def test_unsure_boxes_complete_persons_but_never_start_one():
     ].indices == (0, 0, 0)
 
 
+def _views(n):
+    """Views for the grouping steps when box centres are given and step 7 is off (they read no pixels)."""
+    from types import SimpleNamespace
+
+    return [SimpleNamespace(depth=None, camera=None) for _ in range(n)]
+
+
+def test_an_unsure_box_that_repeats_a_sure_one_completes_no_other_person():
+    from detector.skeleton_matching import free_unsure, match_heatmaps
+
+    A, B = TEMPLATE + [0, 0, 3000], TEMPLATE + [0, 0, 3250]
+    # view 0: A (sure); view 1: B (sure) and an unsure second box of B 8 cm off, which lies 17 cm from A:
+    # within the 30 cm that lets an unsure box complete a person, but B's by step 2 (within 20 cm of B's box)
+    joints = np.stack([A, B, B - [0, 0, 80]])
+    ok = np.ones((3, 10), bool)
+    boxes = [np.zeros((1, 4)), np.zeros((2, 4))]
+    candidate = [np.array([False]), np.array([False, True])]
+    free = free_unsure(boxes, candidate, joints, ok, same_view_mm=200.0)
+    assert [f.tolist() for f in free] == [[False], [False, False]]
+    config = SkeletonMatchConfig(threshold_mm=200.0, free_space_mm=None)  # A and B are two persons
+    groups = match_heatmaps(MeanFusion(joints), _views(2), boxes, config, candidate=candidate, detected=True,
+                            centres=np.full((3, 3), np.nan))  # fmt: skip
+    assert sorted(g.indices for g in groups) == [(-1, 0), (0, -1)]
+    # 29 cm from B's box (15 cm from A) it is someone else's, and completes A
+    far = np.stack([A, B, A - [0, 150, 0]])
+    assert free_unsure(boxes, candidate, far, ok, 200.0)[1].tolist() == [False, True]
+    groups = match_heatmaps(MeanFusion(far), _views(2), boxes, config, candidate=candidate, detected=True,
+                            centres=np.full((3, 3), np.nan))  # fmt: skip
+    assert sorted(g.indices for g in groups) == [(-1, 0), (0, 1)]
+
+
 def test_a_box_far_from_the_rest_of_its_person_is_dropped():
     from detector.skeleton_matching import drop_outliers
 
