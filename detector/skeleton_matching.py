@@ -28,9 +28,7 @@ The rule, for the N boxes of a frame:
    fused skeleton (one box per person and view, the closest, by optimal assignment; ByteTrack's second
    association, made across views). On day 4 of the twin, 32 of the 35 annotated boxes that no confident box
    covers are covered by an unsure one (IoU >= 0.5, scores 0.17-0.49): a person half hidden behind another is
-   still seen, just not confidently. An unsure box whose skeleton lies within ``same_view_mm`` of a sure box of
-   its own view is, by step 2's rule, a second box of that box's person: it completes nobody else
-   (:func:`free_unsure`).
+   still seen, just not confidently.
 6. **A box that disagrees with the rest of its person** (``outlier_mm``): in a person of three or more boxes,
    each box's single-view skeleton is compared with the person fused from its other boxes; the box farthest
    from it is dropped when that median joint distance exceeds ``outlier_mm``. Such a box holds half of the
@@ -95,8 +93,11 @@ class SkeletonMatchConfig:
     # detector, splits fall to 600 mm and merges rise beyond it (docs/detector.md).
     threshold_mm: float = 600.0
     # Box centres farther apart than this never match (the centre matcher's t is 75 cm; it is the centres that
-    # fail, so this is only a bound against two far-apart persons whose skeletons agree by chance).
-    centre_gate_mm: float = 1500.0
+    # fail, so this is only a bound against two far-apart persons whose skeletons agree by chance). 1500 mm until
+    # 2026-12-05: a box over a person's upper body lifts its centre onto whatever stands in front, and on the
+    # eight tuning sequences (never the day-4 test) 1500 / 2000 / 2500 mm / no bound split 112 / 36 / 34 / 34 of
+    # 3,195 persons and merged 134 each (docs/detector.md).
+    centre_gate_mm: float = 2500.0
     # Two boxes of one view whose skeletons agree this well read the same person (a duplicate gives the same
     # skeleton to a few cm). Two people can come this close: on the long tracking sequence two clinicians stood
     # 25 cm apart (mean joint distance) for 10 frames and were merged at 250 mm. Chosen again on held-out data
@@ -359,36 +360,11 @@ def match_heatmaps(
                                  None if centres is None else centres[flat])  # fmt: skip
         groups = _in_full_lists(groups, sure)
         if config.candidate_mm is not None and groups:
-            candidate = free_unsure(boxes, candidate, joints, ok, config.same_view_mm)
             groups = admit_candidates(heat, groups, boxes, candidate, joints, ok, config.candidate_mm)
     if not detected:
         return groups
     groups = drop_outliers(heat, groups, boxes, joints, ok, config.outlier_mm)
     return drop_unseen(groups, views, boxes, joints, ok, config.free_space_mm, config.min_visible_joints)
-
-
-def free_unsure(
-    boxes: Sequence[np.ndarray], candidate: Sequence[np.ndarray], joints: np.ndarray, ok: np.ndarray,
-    same_view_mm: float,
-) -> list[np.ndarray]:  # fmt: skip
-    """``candidate`` (per view ``(K_v,)`` bool, the unsure boxes) without those whose single-view skeleton lies
-    within ``same_view_mm`` of a sure box of their own view: by step 2's rule a second box of that box's person,
-    never a view of another (on the twin's day 4, a box over half of one clinician in a cluster of five
-    completed the clinician beside her, 50 cm from where she stood). ``joints``, ``ok``: as
-    :func:`admit_candidates`."""
-    starts = box_starts(boxes)
-    out = []
-    for v, cand in enumerate(candidate):
-        cand = np.asarray(cand, bool).reshape(-1)
-        unsure, sure = starts[v] + np.flatnonzero(cand), starts[v] + np.flatnonzero(~cand)
-        free = cand.copy()
-        if len(unsure) and len(sure):
-            d = joint_median_distance(
-                joints[unsure][:, None], ok[unsure][:, None], joints[sure][None], ok[sure][None]
-            )
-            free[np.flatnonzero(cand)] = ~(d <= same_view_mm).any(1)  # NaN compares False
-        out.append(free)
-    return out
 
 
 def _in_full_lists(groups: list[Group], subset: Sequence[np.ndarray]) -> list[Group]:
@@ -434,13 +410,11 @@ def group_unsure(
     which costs most (each person's other views checked one by one).
 
     They are no person of the frame on their own: a tracker may take one to continue a track it already has."""
-    if candidate is None:
+    left = unsure_left(groups, candidate)
+    if left is None:
         return []
     config = config or SkeletonMatchConfig()
     joints, ok = _lifted(heat.single_view())  # (N, J, 3), (N, J)
-    left = unsure_left(groups, free_unsure(boxes, candidate, joints, ok, config.same_view_mm))
-    if left is None:
-        return []
     flat = np.concatenate(left)
     unsure = match_skeletons(
         [np.asarray(b).reshape(-1, 4)[m] for b, m in zip(boxes, left, strict=True)],

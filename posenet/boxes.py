@@ -275,7 +275,7 @@ def ground_truth_ids(sample, pred_boxes: Sequence[Sequence[Sequence[float] | Non
     -1: people it boxed but gave no pose, such as the patient or someone barely in view) compete as well, each
     as a person of its one view, so a predicted person who overlaps one of them best is that person (None here)
     and is not scored against an annotated neighbour it barely overlaps (MOTChallenge's distractors; on the
-    alt look's day 4, frame 44: one annotated person, seen from the hips down, among four box-only ones).
+    alt look's day 4, frame 44: one annotated person, seen by one camera, among four box-only ones).
 
     Args:
         sample: the annotated frame (a ``posenet.data.sample.Sample``); its persons are :func:`person_ids`.

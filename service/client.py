@@ -16,7 +16,7 @@ Image files are sent as they are on disk (no decoding or re-encoding): ``dayD/ca
 16-bit depth beside it in ``depth/``. With ``--reference-boxes`` the annotated boxes that have a person id are
 sent with those ids (the paper's reference-box setting, detection skipped). ``--evaluate`` scores the whole
 output file with ``posenet.evaluate``; in detector mode each returned person is first given the ground-truth
-id whose boxes it overlaps most (mean IoU over the views, as in the paper).
+id whose boxes it overlaps most (mean IoU over the views, as in the paper; MVOR's box-only people compete).
 
 ``--track`` sends each sequence's frames (the ``sequence``, ``frame_index`` and ``timestamp_s`` of each
 multi-view frame) in time order through one stream per sequence (``POST /streams/{id}/frames``; up to

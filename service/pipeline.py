@@ -28,8 +28,6 @@ from detector.matching import box_centres_3d, combination_bound
 from detector.skeleton_matching import (
     CANDIDATE_SCORE,
     SkeletonMatchConfig,
-    _lifted,
-    free_unsure,
     group_unsure,
     match_heatmaps,
     members_of,
@@ -360,11 +358,9 @@ class ScenePipeline:
                 raise ValueError(f"the boxes make {len(groups)} persons, more than {why}")
             # Detector mode: the matcher lists multi-view groups first; the best-supported persons are kept.
             ids, groups, matched = ids[:limit], groups[:limit], matched[:limit]
-        left = None  # the unsure boxes no person took, nor duplicate a person's sure box
-        if unsure and heat is not None and scores[0] is not None and candidate is not None:
-            joints, ok = _lifted(heat.single_view())
-            free = free_unsure(boxes, candidate, joints, ok, self._skeleton_config().same_view_mm)
-            left = unsure_left(all_matched, free)
+        left = (
+            None if not unsure or heat is None or scores[0] is None else unsure_left(all_matched, candidate)
+        )
         sure = None  # the fusion of the frame's own persons, when the tracker's question needs it first
         unsure_ms = 0.0
         if left is not None:  # unsure boxes no person took: their persons, for a tracker (when it asks)
