@@ -33,9 +33,11 @@ skeleton matcher compares across views) against its person's annotated pose.
 joints) and their share of the excess: on the twin's day 4 (2026-12-05) one frame of five clinicians in a
 cluster holds most of the three-view excess.
 
-``--picture PNG`` also draws the frame where the default took the most unsure boxes: every detected box of
-each view, coloured by the person it ended in (solid: sure, dashed: unsure and taken), unsure boxes that
-completed nobody dotted grey, and sure boxes in no person (dropped as outliers, or by the free-space rule) in red.
+``--picture PNG`` also draws the frame where the default took the most unsure boxes (``--picture-frame ID``: that
+frame instead, its multi-view id or a unique part of it): every detected box of each view, coloured by the person
+it ended in (solid: sure, dashed: unsure and taken), unsure boxes that completed nobody dotted grey, sure boxes in
+no person (dropped as outliers, or by the free-space rule) in red, and the annotated boxes thin and white with
+their person id ("-": box-only).
 """
 
 from __future__ import annotations
@@ -149,8 +151,15 @@ def draw_frame(pipe: ScenePipeline, sample, out: Path) -> None:
             else:
                 style = {"edgecolor": "red", "linestyle": "-", "linewidth": 2.2}
             ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, **style))
+        truth = sample.views[v]
+        for (x0, y0, x1, y1), pid in zip(
+            np.asarray(truth.boxes).reshape(-1, 4), truth.box_person_ids, strict=True
+        ):
+            ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, edgecolor="white", linewidth=0.8))
+            ax.text(x0 + 2, y1 - 3, str(pid) if pid >= 0 else "-", color="white", fontsize=7, va="bottom")
     fig.suptitle(f"{sample.id}: solid = sure box, dashed = unsure box that completed its person, dotted grey = "
-                 "unsure box left out, red = sure box in no person (an outlier, or nobody by free space); colour = person", fontsize=8)  # fmt: skip
+                 "unsure box left out,\nred = sure box in no person (an outlier, or nobody by free space); colour = "
+                 "person; thin white = annotated box and its id", fontsize=8)  # fmt: skip
     fig.tight_layout()
     fig.savefig(out, dpi=72)
     plt.close(fig)
@@ -207,6 +216,8 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument(
         "--picture", type=Path, help="draw the frame where the default took most unsure boxes (PNG)"
     )
+    p.add_argument("--picture-frame", metavar="ID",
+                   help="with --picture: draw this frame instead (its multi-view id, or a unique part of it)")  # fmt: skip
     p.add_argument("--worst", type=int, default=0, metavar="N",
                    help="also list, per number of supporting views, the N poses that the last of --variants (the "
                    "served default unless chosen) answers worst against reference boxes, and their share of its excess")  # fmt: skip
@@ -223,6 +234,13 @@ def main(argv: list[str] | None = None) -> dict:
     # The views as the service decodes them (at the networks' read size, tests/test_parity.py): the detector then
     # sees the pixels it sees when served, and the figures are the served ones.
     ds = read_dataset(args.data, gt, pipe.read_size, days)
+    if args.picture_frame:
+        hits = [i for i, name in enumerate(ds.ids) if args.picture_frame in name]
+        if len(hits) != 1:
+            p.error(
+                f"--picture-frame {args.picture_frame!r} names {len(hits)} frames of {args.data} days {days}"
+            )
+        chosen = hits[0]
     default = SkeletonMatchConfig()
     lowest = min([pipe.detector.cfg.score_threshold] + [v[0] for v in VARIANTS.values() if v[0] is not None])
     pipes = {}
@@ -320,12 +338,15 @@ def main(argv: list[str] | None = None) -> dict:
                 print(
                     f"    {q['frame']} person {q['person_id']}: {q['reference_cm']:.1f} -> {q['detected_cm']:.1f} cm"
                 )
+    if args.picture and args.picture_frame:
+        best = (None, chosen)
     if args.picture and best[1] is not None:
         variant = pipes[args.variants[-1]]
         sample = ds[best[1]]
         variant.detector = FrameDetections(pipe.detector, views_of(sample), lowest)
         draw_frame(variant, sample, args.picture)
-        print(f"picture of frame {sample.id} ({best[0]} unsure boxes taken): {args.picture}")
+        taken = "" if best[0] is None else f" ({best[0]} unsure boxes taken)"
+        print(f"picture of frame {sample.id}{taken}: {args.picture}")
     out = {"data": str(args.data), "days": days, "machine": machine_line(), "rows": rows,
            "pose_checkpoint": str(args.pose_checkpoint or "shipped"), "flip_test": pipe.pose.model.config.flip_test}  # fmt: skip
     if args.json:
