@@ -234,13 +234,14 @@ def main(argv: list[str] | None = None) -> dict:
     # The views as the service decodes them (at the networks' read size, tests/test_parity.py): the detector then
     # sees the pixels it sees when served, and the figures are the served ones.
     ds = read_dataset(args.data, gt, pipe.read_size, days)
+    best = (-1, None)  # (unsure boxes taken, frame index) for --picture; a named frame: (None, its index)
     if args.picture_frame:
         hits = [i for i, name in enumerate(ds.ids) if args.picture_frame in name]
         if len(hits) != 1:
             p.error(
                 f"--picture-frame {args.picture_frame!r} names {len(hits)} frames of {args.data} days {days}"
             )
-        chosen = hits[0]
+        best = (None, hits[0])
     default = SkeletonMatchConfig()
     lowest = min([pipe.detector.cfg.score_threshold] + [v[0] for v in VARIANTS.values() if v[0] is not None])
     pipes = {}
@@ -251,7 +252,6 @@ def main(argv: list[str] | None = None) -> dict:
         config = replace(PipelineConfig(), candidate_score=candidate, skeleton_match=match)
         pipes[name] = ScenePipeline(pipe.pose, pipe.detector, config)
     preds = {"reference": [], **{n: [] for n in pipes}}
-    best = (-1, None)  # (unsure boxes taken, frame index) for --picture
     times = {n: {"match": [], "pose": []} for n in pipes}
     nobody = dict.fromkeys(pipes, 0)
     alone = []  # --single-view: (B, 2) mm per frame
@@ -271,7 +271,7 @@ def main(argv: list[str] | None = None) -> dict:
             nobody[name] += sum(pid is None for pid in ids)
             for k in ("match", "pose"):
                 times[name][k].append(result.timings[k])
-            if name == args.variants[-1] and args.picture:
+            if name == args.variants[-1] and args.picture and best[0] is not None:
                 taken = _used_unsure(variant, views, result)
                 if taken > best[0]:
                     best = (taken, i)
@@ -338,8 +338,6 @@ def main(argv: list[str] | None = None) -> dict:
                 print(
                     f"    {q['frame']} person {q['person_id']}: {q['reference_cm']:.1f} -> {q['detected_cm']:.1f} cm"
                 )
-    if args.picture and args.picture_frame:
-        best = (None, chosen)
     if args.picture and best[1] is not None:
         variant = pipes[args.variants[-1]]
         sample = ds[best[1]]

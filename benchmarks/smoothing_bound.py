@@ -22,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 from scipy.signal import savgol_filter
-from tracking import sequences, served_lines, served_pairs, served_tracks
+from tracking import sequences, served_lines, served_tracks
 
 from posenet.data.mvor import load_annotations
 from posenet.execution import machine_line
+from posenet.track_eval import gated_pairs
 
 MEANS = (3, 5, 9, 15)
 SAVGOL = ((9, 2), (15, 2), (31, 2))
@@ -37,7 +38,7 @@ def paired_tracks(gt: dict, lines: dict) -> dict[tuple[int, int], list[tuple]]:
     for seq, rows in sequences(gt).items():
         for frame_id, frame in rows:
             tracks, _ = served_tracks(lines, frame_id)
-            for g, t in served_pairs(frame, tracks):
+            for g, t in gated_pairs(frame.gt_joints, tracks):
                 out[(seq, t)].append((tracks[t].raw, tracks[t].joints, frame.gt_joints[g]))
     return out
 

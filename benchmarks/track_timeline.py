@@ -21,9 +21,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from tracking import sequences, served_lines, served_pairs, served_tracks  # noqa: E402
+from tracking import sequences, served_lines, served_tracks  # noqa: E402
 
-from posenet.data.mvor import load_annotations  # noqa: E402
+from posenet.data.mvor import load_annotations
+from posenet.track_eval import gated_pairs  # noqa: E402
 
 
 def coverage(gt: dict, lines: dict, sequence: int) -> dict[int, list[tuple[str | int | None, bool]]]:
@@ -37,7 +38,7 @@ def coverage(gt: dict, lines: dict, sequence: int) -> dict[int, list[tuple[str |
             out[int(g)][f] = ("missed", False)
         tracks, _ = served_tracks(lines, frame_id)
         unsure = {p["track_id"] for p in lines[frame_id]["response"]["persons"] if p.get("unsure")}
-        for g, t in served_pairs(frame, tracks):
+        for g, t in gated_pairs(frame.gt_joints, tracks):
             out[int(frame.gt_ids[g])][f] = (t, t in unsure)
     return out
 

@@ -34,16 +34,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from posenet.data.mvor import load_annotations, room_up
+from posenet.data.mvor import load_annotations, pose_joints, room_up
 from posenet.execution import machine_line
+from posenet.skeleton import NUM_JOINTS
 from posenet.track import Tracker, TrackerConfig, mean_joint_distance, skeleton_height
 from posenet.track_eval import (
-    GATE_MM,
     GOALS,
     SequenceFrame,
     TrackedPerson,
     evaluate,
-    gated_pairs,
     goal_lines,
     score,
 )
@@ -154,6 +153,11 @@ def tracker_config(overrides: list[str]) -> TrackerConfig:
     return config
 
 
+def _joints(poses: list[dict]) -> np.ndarray:
+    """``(N, J, 3)`` mm: the joints of ``annotations3D``-style entries (``posenet.data.mvor.pose_joints``)."""
+    return np.array([pose_joints(p, i)[0] for i, p in enumerate(poses)], float).reshape(-1, NUM_JOINTS, 3)
+
+
 def sequences(
     gt: dict, detections: dict[str, dict] | None = None
 ) -> dict[int, list[tuple[str, SequenceFrame]]]:
@@ -173,18 +177,14 @@ def sequences(
         frame = SequenceFrame(
             timestamp_s=float(mv["timestamp_s"]),
             gt_ids=np.array([p["person_id"] for p in gts], int),
-            gt_joints=np.array([np.reshape(p["keypoints3D"], (-1, 4))[:10, :3] for p in gts]).reshape(
-                -1, 10, 3
-            ),
+            gt_joints=_joints(gts),
             joints=np.array([p["joints"] for p in det], float).reshape(-1, 10, 3),
             spread=np.array([p["spread_mm"] for p in det], float).reshape(-1, 10),
             unsure=np.array([p.get("unsure", False) for p in det], bool),
             up=up
             if up is not None or detections is None or detections[mv["id"]].get("up") is None
             else np.asarray(detections[mv["id"]]["up"], float),
-            ignore_joints=np.array(
-                [np.reshape(p["keypoints3D"], (-1, 4))[:10, :3] for p in mv.get("unannotated3D", [])]
-            ).reshape(-1, 10, 3),
+            ignore_joints=_joints(mv.get("unannotated3D", [])),
         )
         out[mv["sequence"]].append((mv["id"], frame))
     for rows in out.values():
@@ -218,14 +218,6 @@ def served_tracks(lines: dict[str, dict], frame_id: str) -> tuple[dict[int, Trac
             tracks[int(p["track_id"])] = TrackedPerson(int(p["track_id"]), raw, smooth)
     timings = response.get("timings", {})
     return tracks, float(timings.get("track", float("nan"))) + float(timings.get("unsure", 0.0))
-
-
-def served_pairs(
-    frame: SequenceFrame, tracks: dict[int, TrackedPerson], gate_mm: float = GATE_MM
-) -> list[tuple]:
-    """One frame's (ground-truth index, track id) pairs: the optimal assignment on the mean joint distance between
-    the ground truth and the tracks' smoothed joints, pairs beyond ``gate_mm`` left out (``track_eval``'s gate)."""
-    return gated_pairs(frame.gt_joints, tracks, gate_mm)
 
 
 def births(frames: list[SequenceFrame], tracker: Tracker, near_mm: float = 500.0) -> list[dict]:
