@@ -1,10 +1,12 @@
 """Fit the calibrated per-joint confidence of a pose checkpoint (``posenet.calibration``) and report it.
 
-Usage (the shipped weights; the fit data is rendered with a seed no training run used)::
+Usage (the shipped weights; the fit data is rendered with seeds no training run used: procedural scenes and the
+tracking tuning sequences, whose OR-like motions make it calibrated on MVOR's poses; docs/MODEL_CARD.md)::
 
     python -m posenet.data.synth --out data/calib_rand --scenes 60 --rig mvor --look random --seed 99 --workers 1
     python -m posenet.data.synth --out data/calib_twinlook --scenes 60 --rig mvor --look twin --seed 99 --workers 1
-    python -m posenet.calibrate --data data/calib_rand --data data/calib_twinlook \\
+    python -m posenet.calibrate --data data/calib_rand --data data/calib_twinlook --data data/seq_tune \\
+        --data data/seq_t3 ... --data data/seq_t9 --cache runs/calib_cache \\
         --test data/mvor_twin:4 --test data/mvor_alt:4 --plot docs/img/calibration.png --write
 
 It predicts every annotated person of the ``--data`` sets (``DIR[:DAY,DAY...]``, pooled) with its reference
@@ -21,6 +23,7 @@ import argparse
 import hashlib
 import json
 import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -96,8 +99,9 @@ def plot(results: dict[str, dict], path: Path) -> None:
             shown = count >= 10  # bins of a handful of joints say nothing
             ax.plot(conf[shown], rate[shown], "o-", color=colour, label=f"{cal}: ECE {rel['ece']:.3f}")
         ax.set(xlim=(0, 1), ylim=(0, 1), xlabel="confidence (predicted P(error <= 10 cm))")
-        ax.set_title(
-            f"{name}\n{rel['joints']} joints, {100 * rel['hit_rate']:.0f} % within 10 cm", fontsize=9
+        ax.set_title(  # a fit over many sets has a long name: wrapped to the panel
+            f"{textwrap.fill(name, 52)}\n{rel['joints']} joints, {100 * rel['hit_rate']:.0f} % within 10 cm",
+            fontsize=9,
         )
         ax.legend(loc="upper left", fontsize=8)
     axes[0][0].set_ylabel("observed share within 10 cm")
