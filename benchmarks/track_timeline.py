@@ -24,7 +24,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from tracking import sequences, served_lines, served_tracks  # noqa: E402
 
 from posenet.data.mvor import load_annotations
-from posenet.track_eval import gated_pairs  # noqa: E402
+from posenet.track_eval import gated_pairs
 
 
 def coverage(gt: dict, lines: dict, sequence: int) -> dict[int, list[tuple[str | int | None, bool]]]:

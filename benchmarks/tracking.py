@@ -38,14 +38,7 @@ from posenet.data.mvor import load_annotations, pose_joints, room_up
 from posenet.execution import machine_line
 from posenet.skeleton import NUM_JOINTS
 from posenet.track import Tracker, TrackerConfig, mean_joint_distance, skeleton_height
-from posenet.track_eval import (
-    GOALS,
-    SequenceFrame,
-    TrackedPerson,
-    evaluate,
-    goal_lines,
-    score,
-)
+from posenet.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
 
 
 def detect(

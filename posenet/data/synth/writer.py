@@ -349,9 +349,11 @@ def render_job(job: Job) -> JobResult:
     mv_id = "_".join(str(im["id"]) for im in images)
     poses, unannotated = [], []
     for i, person in enumerate(frame.persons):
-        listed = cfg.mode == "sequence" and boxed[i]  # boxed, if annotated in no view: in unannotated3D
-        if person.person_id < 0 or not (support[i] or listed or cfg.mode == "twin"):
-            continue  # the twin keeps every real pose, even one its own boxes miss (MVOR reuses ids)
+        # the twin keeps every real pose, even one its own boxes miss (MVOR reuses ids); a sequence lists a person
+        # boxed but annotated in no view in unannotated3D
+        has_pose = bool(support[i]) or cfg.mode == "twin"
+        if person.person_id < 0 or not (has_pose or (cfg.mode == "sequence" and boxed[i])):
+            continue
         if cfg.mode == "twin":
             # the frame's first persons are its real poses, in order (twin_frame; ids made unique there)
             flat = twin.frames[job.index].poses[i][1].ravel().tolist()  # the real annotation, unchanged
@@ -360,7 +362,7 @@ def render_job(job: Job) -> JobResult:
             seen[i, 10], seen[i, 11] = seen[i, 8], seen[i, 9]  # hands follow the wrists
             flags = np.where(seen[i], 2.0, 1.0)
             flat = np.concatenate([pts, flags[:, None]], 1).round(3).ravel().tolist()
-        if support[i] or cfg.mode == "twin":
+        if has_pose:
             poses.append(
                 {"ref_camera": 0, "person_id": person.person_id, "image_ids": mv_id, "keypoints3D": flat}
             )
