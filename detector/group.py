@@ -73,6 +73,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
     p.add_argument("--score-threshold", type=float, help="lowest score kept (default: the checkpoint's)")
     p.add_argument("--threshold-mm", type=float, default=750.0, help="the matcher's largest centre distance")
     p.add_argument("--device", default="cpu")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     p.add_argument("--out", required=True, help="json list of {image_id, bbox, person_id, score}")
     args = p.parse_args(argv)
 
@@ -90,6 +91,10 @@ def main(argv: list[str] | None = None) -> list[dict]:
         from detector.infer import PersonDetector
         from detector.predict import predict_records
 
+        if args.threads:
+            import torch
+
+            torch.set_num_threads(args.threads)
         detector = PersonDetector.from_checkpoint(args.checkpoint, args.device)
         threshold = detector.cfg.score_threshold if threshold is None else threshold
         predictions = predict_records(detector, load_records(gt, args.days), args.data, threshold)

@@ -15,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import torch
 from tqdm import tqdm
 
 from detector.data import ImageRecord, load_records, read_record
@@ -78,8 +79,13 @@ def main(argv: list[str] | None = None) -> list[dict]:
         "--no-nms", action="store_true", help="no non-maximum suppression, whatever the checkpoint says"
     )
     parser.add_argument("--device", default="cpu")
+    parser.add_argument(
+        "--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)"
+    )
     args = parser.parse_args(argv)
 
+    if args.threads:
+        torch.set_num_threads(args.threads)
     detector = PersonDetector.from_checkpoint(args.checkpoint, args.device)
     if args.no_nms or args.nms_iou is not None:
         detector.cfg = replace(detector.cfg, nms_iou=None if args.no_nms else args.nms_iou)
