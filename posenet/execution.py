@@ -167,3 +167,9 @@ def machine_line(info: dict | None = None) -> str:
         f"machine: {m['cpu']}, {m['cores']} cores, torch capability {m['torch_capability']}, native bf16 "
         f"{'yes' if m['native_bf16'] else 'no'}; torch {m['torch']}{', ' + runtimes if runtimes else ''}"
     )
+
+
+def cache_dir() -> Path:
+    """Where this machine keeps what it builds from the loaded weights (exported graphs, int8 calibration):
+    ``$ORPOSE_CACHE_DIR``, else ``~/.cache/or-pose``."""
+    return Path(os.environ.get("ORPOSE_CACHE_DIR", Path.home() / ".cache" / "or-pose"))

@@ -8,8 +8,9 @@ unseen alt look; detector AP50 unchanged). ``--precision int8`` / ``ORPOSE_PRECI
 never chosen by ``auto``, since it trades accuracy, however little, for speed.
 
 Post-training quantization needs inputs to measure each layer's range: **calibration scenes** that the package's
-own renderer draws at first use (``CALIBRATION``: the randomised look on MVOR's rig, a fixed seed, so every machine
-builds the same graph; kept in the runtime cache), never a look or a day that the figures are measured on. Each
+own renderer draws at first use (``CALIBRATION``: the randomised look on random three-camera rigs, a fixed seed,
+so every machine builds the same graph, from the package alone; kept in the runtime cache), never a look or a day
+that the figures are measured on. Each
 network is run in float32 on them, its inputs recorded at the runtime's boundary (:class:`Recorder`), and
 :func:`quantize_graph` writes the int8 graph beside the float32 one in the runtime cache, named by the float32
 graph and the calibration, so it is built once per weights (``python -m service.export --int8`` builds it ahead
@@ -18,9 +19,7 @@ of time).
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
-import io
 import json
 import logging
 import os
@@ -32,26 +31,28 @@ from pathlib import Path
 
 import numpy as np
 
+from posenet.execution import cache_dir
+
 log = logging.getLogger(__name__)
 
 # The rendered scenes that calibrate the int8 graphs: enough persons and views to cover each layer's range, few
 # enough to render in seconds. ORPOSE_INT8_SCENES overrides the count (tests use fewer).
-CALIBRATION = {"scenes": 12, "rig": "mvor", "look": "random", "seed": 20261203}
+CALIBRATION = {"scenes": 12, "rig": "random", "views": 3, "days": 3, "look": "random", "seed": 20261206}
 
 
 def calibration_config() -> dict:
     scenes = int(os.environ.get("ORPOSE_INT8_SCENES", CALIBRATION["scenes"]))
     if scenes < 1:
         raise ValueError(f"ORPOSE_INT8_SCENES must be at least 1, got {scenes}")
-    return {**CALIBRATION, "scenes": scenes}
+    return {**CALIBRATION, "scenes": scenes, "days": min(CALIBRATION["days"], scenes)}
 
 
 def _rendered(config_json: str) -> Path:
-    """The folder of the calibration scenes, rendered once into the runtime cache (``posenet.runtime.cache_dir``,
-    ~10 MB, named by the calibration) and reused by every later build and process; the samples are read from it
-    when needed, so they do not stay in memory."""
-    from posenet.data.synth.__main__ import main as synth
-    from posenet.runtime import cache_dir
+    """The folder of the calibration scenes, rendered once into the runtime cache
+    (``posenet.execution.cache_dir``, ~10 MB, named by the calibration) and reused by every later build and
+    process; the samples are read from it when needed, so they do not stay in memory. The scenes need nothing
+    but the package: procedural people on random rigs, never MVOR's annotation file."""
+    from posenet.data.synth.writer import SynthConfig, generate
 
     cfg = json.loads(config_json)
     folder = cache_dir() / f"int8-calibration-{hashlib.sha256(config_json.encode()).hexdigest()[:12]}"
@@ -60,9 +61,7 @@ def _rendered(config_json: str) -> Path:
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f"{folder.name}.", dir=folder.parent))
     try:
-        argv = ["--out", str(tmp), "--scenes", str(cfg["scenes"]), "--rig", cfg["rig"], "--look", cfg["look"]]
-        with contextlib.redirect_stdout(io.StringIO()):  # the renderer prints its summary
-            synth(argv + ["--seed", str(cfg["seed"]), "--workers", "1", "--quiet"])
+        generate(SynthConfig(out=str(tmp), mode="procedural", workers=1, **cfg), progress=False)
         try:
             tmp.rename(folder)  # whole or not at all; another process may have finished first
         except OSError:

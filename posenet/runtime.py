@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from posenet.execution import Precision
+from posenet.execution import Precision, cache_dir
 
 BACKENDS = ("auto", "torch", "onnxruntime", "openvino")
 # Bumped whenever the export itself changes, so that cached graphs of an older exporter are rebuilt.
@@ -110,16 +110,12 @@ def load_runner(
                 float32 = functools.partial(OnnxRunner, graph, "openvino", threads, fp32)
                 return OnnxRunner(quantize_graph(graph, lambda: calibrate(float32()), transformer), "openvino",
                                   threads, precision), chosen  # fmt: skip
-            except Exception as exc:
+            except (Exception, SystemExit) as exc:  # whatever calibration raises, float32 still runs
                 log.warning("int8 quantization failed, running float32: %s", exc)
                 precision = Precision("fp32", f"int8 failed ({type(exc).__name__}: {exc}); float32")
         return OnnxRunner(graph, chosen.name, threads, precision), chosen
-    except Exception as exc:  # a broken runtime must leave a working (torch) model
+    except (Exception, SystemExit) as exc:  # a broken runtime must leave a working (torch) model
         return None, Backend("torch", f"{chosen.name} failed ({type(exc).__name__}: {exc}); using torch")
-
-
-def cache_dir() -> Path:
-    return Path(os.environ.get("ORPOSE_CACHE_DIR", Path.home() / ".cache" / "or-pose"))
 
 
 def graph_key(module: torch.nn.Module, extra: dict) -> str:

@@ -76,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
         networks = [("pose", PoseEstimator, args.pose_checkpoint)]
         if not args.no_detector:
             networks.append(("detector", PersonDetector, args.detector_checkpoint))
+        failed = []
         for name, cls, checkpoint in networks:
             t0 = time.perf_counter()
             net = cls.from_checkpoint(checkpoint, precision="int8", backend="openvino")
@@ -87,6 +88,11 @@ def main(argv: list[str] | None = None) -> int:
                     {**report, "reason": net.precision.reason, "seconds": round(time.perf_counter() - t0, 1)}
                 )
             )
+            if not net.precision.int8:
+                failed.append(f"{name}: {net.precision.reason}")
+        if failed:  # a build step (docker/Dockerfile) must not pass without the graphs it was asked for
+            print(json.dumps({"cache_dir": str(cache_dir())}))
+            raise SystemExit("error: int8 graphs not built (" + "; ".join(failed) + ")")
     print(json.dumps({"cache_dir": str(cache_dir())}))
     return 0
 

@@ -120,8 +120,9 @@ def free_port() -> int:
 class Server:
     """``uvicorn service.app:app`` in a subprocess; ``with Server(env) as url: ...``."""
 
-    def __init__(self, env: dict[str, str], startup_s: float = 120.0) -> None:
+    def __init__(self, env: dict[str, str], startup_s: float = 120.0, cwd: Path = REPO_ROOT) -> None:
         self.port = free_port()
+        self.cwd = cwd
         self.url = f"http://127.0.0.1:{self.port}"
         self.env = {**os.environ, "HF_HUB_OFFLINE": "1", "ORPOSE_THREADS": "1", **env}
         self.startup_s = startup_s
@@ -141,7 +142,7 @@ class Server:
         # The log goes to a file: a pipe that nobody reads fills up and then blocks the server's writes.
         self.log = tempfile.TemporaryFile("w+")
         self.proc = subprocess.Popen(
-            cmd, cwd=REPO_ROOT, env=self.env, stdout=self.log, stderr=subprocess.STDOUT
+            cmd, cwd=self.cwd, env=self.env, stdout=self.log, stderr=subprocess.STDOUT
         )
         deadline = time.monotonic() + self.startup_s
         while time.monotonic() < deadline:
