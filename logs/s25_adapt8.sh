@@ -1,6 +1,0 @@
-source .venv/bin/activate
-python -m posenet.adapt --data data/mvor_alt --days 1 2 3 --source-data data/mvor_rand123gd data/synth_mvorrig_randgd \
-  --minutes 8 --threads 2 --out runs/adapt25_alt8 > logs/s25_adapt8_run.log 2>&1
-echo "adapt rc=$?"
-bash logs/s25_eval.sh runs/adapt25_alt8/last adapt25m8 mvor_alt mvor_twin
-echo ADAPT_DONE
