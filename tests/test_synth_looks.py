@@ -36,11 +36,11 @@ TINY = ["--scenes", "1", "--days", "1", "--views", "2", "--seed", "3", "--quiet"
 # Digests of tiny renders made by the renderer before looks existed (commit 01ea7db), on numpy 2.4.6 and
 # OpenCV 5.0.0: the twin look must still render exactly these pixels. Float functions may round differently on
 # another CPU or library build, so the check only runs where they give the bits they gave here. The procedural
-# digest hashed file bytes until session 9; it now hashes decoded pixels, recorded on OpenCV 5.1.0 after the
+# digest hashed file bytes until commit 6563138; it now hashes decoded pixels, recorded on OpenCV 5.1.0 after the
 # byte digest of 01ea7db (305ba736...) had been reproduced there with the old writer. OpenBLAS picks its matrix
 # kernels by CPU, and they round differently: on AMD Zen 5 (2026-12-05) it takes its Haswell kernels, where
 # Zen 4 took its SkylakeX ones, so the platform includes a matrix product, and each platform has its digests
-# (Haswell's: those of session 9's renderer, commit 6563138, rendered there, equal to today's).
+# (Haswell's: those of the renderer at commit 6563138, rendered there, equal to today's).
 GOLDEN = {
     ("2.4.6", "5.1.0", "89f69f8e323013cd", "397fdfdf0420a828"): {  # OpenBLAS SkylakeX kernels
         "procedural": "3ff99941db0e2dfcda5f330429f8fdd95821670ff234ff2410ab1ca0d9985a7a",
@@ -63,7 +63,7 @@ def _platform() -> tuple[str, str, str, str]:
 
 def _digest(root: Path) -> str:
     """Every PNG's pixels and the annotations, less the generator settings (which now name the look). Pixels,
-    not file bytes: how the files are compressed may change (depth: filter NONE since session 9)."""
+    not file bytes: how the files are compressed may change (depth: filter NONE since commit 6563138)."""
     h = hashlib.sha256()
     for p in sorted(root.rglob("*.png")):
         h.update(str(p.relative_to(root)).encode())
