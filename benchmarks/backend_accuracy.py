@@ -4,7 +4,7 @@
     python benchmarks/backend_accuracy.py --data data/mvor_alt --days 4 --variants torch-fp32 openvino-auto
 
 For each variant (backend x precision) it runs the pose network with the reference boxes on every frame of
-``--days`` (posenet.evaluate's MPJPE, per joint type and per support) and the detector on every view
+``--days`` (posenet.evaluation.evaluate's MPJPE, per joint type and per support) and the detector on every view
 (pycocotools AP50 / AP, detector.evaluate), and prints them beside the torch fp32 reference with the
 difference. Issue 11's bounds: MPJPE within 0.1 cm and AP50 within 0.005 of torch fp32.
 """
@@ -22,11 +22,11 @@ from tqdm import tqdm
 from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
 from detector.predict import predict_records
+from pipeline.two_stage import ScenePipeline
 from posenet.data.mvor import MvorDataset, load_annotations
-from posenet.evaluate import evaluate
-from posenet.execution import machine_line
-from posenet.infer import PoseEstimator
-from service.pipeline import ScenePipeline
+from posenet.evaluation.evaluate import evaluate
+from posenet.net.infer import PoseEstimator
+from posenet.runtime.execution import machine_line
 
 VARIANTS = {  # name: (backend, precision)
     "torch-fp32": ("torch", "fp32"),

@@ -4,13 +4,13 @@
     python benchmarks/detector_mode.py --data data/mvor_alt --days 4 --json runs/detector_mode_alt.json
     python benchmarks/detector_mode.py --data data/mvor_twin --days 4 --pose-checkpoint OLD.safetensors  # other weights
 
-Runs the service's pipeline (``service.pipeline.ScenePipeline``, the shipped weights, the service's default
+Runs the service's pipeline (``pipeline.two_stage.ScenePipeline``, the shipped weights, the service's default
 backend) offline on every frame of ``--days``: once with the reference boxes and their ids (the paper's
 setting), and in detector mode once per variant of the skeleton matcher:
 
 - ``sure``: only boxes at or above the detector's threshold, every box kept in its person (before 2026-12-03);
 - ``+unsure``: boxes scored from ``PipelineConfig.candidate_score`` up may complete a person seen in other
-  views (``detector.skeleton_matching``, step 5);
+  views (``pipeline.skeleton_matching``, step 5);
 - ``+unsure+outliers``: and a box far from the rest of its person leaves it (step 6);
 - ``+unsure+outliers+unseen`` (the default): and a person of one view that another view sees in free space,
   without a box there, is dropped (step 7).
@@ -18,7 +18,7 @@ setting), and in detector mode once per variant of the skeleton matcher:
 The detector runs once per frame (at the lowest score any variant reads); the variants then run one after
 another on the same frame, so that a loaded machine slows them alike. Prints per variant the MVOR per-support
 average (shoulders, hips, elbows, wrists) at 1 / 2 / 3 views and the overall MPJPE (10 joints, cm;
-``posenet.evaluate``), the ratio to the reference boxes, the annotated poses that no returned person was
+``posenet.evaluation.evaluate``), the ratio to the reference boxes, the annotated poses that no returned person was
 matched to (``missed``; persons are matched by ``posenet.boxes.ground_truth_ids``, the paper's mean IoU over the
 views, with MVOR's box-only people competing), the persons returned that are no annotated person (``nobody``:
 false persons, or persons MVOR boxed without a pose, such as the patient), and the median / p95
@@ -51,15 +51,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig, _lifted
+from pipeline.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig, _lifted
+from pipeline.two_stage import PipelineConfig, ScenePipeline
 from posenet.boxes import ground_truth_ids
 from posenet.data.mvor import image_day, load_annotations
-from posenet.evaluate import MM_PER_CM, evaluate, match_predictions, prediction_record
-from posenet.execution import machine_line
-from posenet.predict import read_dataset
+from posenet.evaluation.evaluate import MM_PER_CM, evaluate, match_predictions, prediction_record
+from posenet.evaluation.predict import read_dataset
+from posenet.runtime.execution import machine_line
 from posenet.scene import views_of
 from posenet.skeleton import JOINT_TYPES, SUPPORT_TYPES
-from service.pipeline import PipelineConfig, ScenePipeline
 
 VARIANTS = {  # name: (candidate_score, the outlier rule at its default, the free-space rule at its default)
     "sure": (None, False, False),
@@ -212,7 +212,7 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
     p.add_argument("--json", type=Path, help="also write the results here")
     p.add_argument("--predictions", type=Path,
-                   help="also write each variant's poses here (DIR/NAME.json, posenet.evaluate's input)")  # fmt: skip
+                   help="also write each variant's poses here (DIR/NAME.json, posenet.evaluation.evaluate's input)")  # fmt: skip
     p.add_argument(
         "--picture", type=Path, help="draw the frame where the default took most unsure boxes (PNG)"
     )
@@ -243,7 +243,7 @@ def main(argv: list[str] | None = None) -> dict:
             )
         best = (None, hits[0])
     default = SkeletonMatchConfig()
-    lowest = min([pipe.detector.cfg.score_threshold] + [v[0] for v in VARIANTS.values() if v[0] is not None])
+    lowest = min([pipe.detector.score_threshold] + [v[0] for v in VARIANTS.values() if v[0] is not None])
     pipes = {}
     for name in args.variants:
         candidate, outlier, unseen = VARIANTS[name]

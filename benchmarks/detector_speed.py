@@ -24,8 +24,8 @@ import torch
 
 from detector.infer import PersonDetector
 from detector.model import PRESETS, build_detector, preset
-from posenet.execution import machine_line
-from posenet.runtime import installed
+from posenet.runtime.execution import machine_line
+from posenet.runtime.graphs import installed
 
 RUNTIMES = {  # name: (backend, precision)
     "torch-nchw": ("torch", "fp32"),

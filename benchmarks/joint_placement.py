@@ -1,19 +1,19 @@
 """How much of a look's error is where its joints sit inside the body? A constant offset per joint type, removed.
 
-    python -m posenet.predict --data data/mvor_alt --annotations data/mvor_alt/annotations.json --out P.json
+    python -m posenet.evaluation.predict --data data/mvor_alt --annotations data/mvor_alt/annotations.json --out P.json
     python benchmarks/joint_placement.py --annotations data/mvor_alt/annotations.json --predictions P.json \
         --fit-days 1 2 3 --days 4
 
 Renderers (and annotators) disagree on where a joint lies inside the flesh: MVOR's hips sit near the top of the
 pelvis, its shoulders inside the deltoid, and our ``alt`` look places them elsewhere on purpose
-(``posenet.data.synth.body_alt``). A network trained on other bodies then errs by a constant amount along the body's
+(``posenet.synth.body_alt``). A network trained on other bodies then errs by a constant amount along the body's
 own axes, which no amount of unlabelled data can teach it. This measures that share of the error.
 
 Each prediction's residual (ground truth minus prediction) is written in the predicted skeleton's own frame
-(forward, outward, up: ``posenet.data.synth.skeleton_full.body_frame``; outward mirrored for the right side, so
+(forward, outward, up: ``posenet.synth.skeleton_full.body_frame``; outward mirrored for the right side, so
 that left and right share one offset). The median residual per joint type over ``--fit-days`` is that type's
 offset; adding it back (turned into each pose's frame) to the predictions of ``--days`` gives the corrected
-error. The table prints, per joint type and overall (MPJPE, cm, ``posenet.evaluate``'s matching): the raw error,
+error. The table prints, per joint type and overall (MPJPE, cm, ``posenet.evaluation.evaluate``'s matching): the raw error,
 the error with the offsets fitted on ``--fit-days`` (what a few labelled frames of a new OR would give), and with
 offsets fitted on ``--days`` themselves (an oracle: all the error that a constant placement could explain).
 If the oracle stays near the raw error, the look's error is not a matter of convention.
@@ -29,10 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from posenet.data.mvor import load_annotations
-from posenet.data.synth.skeleton_full import body_frame
-from posenet.evaluate import MM_PER_CM, match_predictions
-from posenet.execution import machine_line
+from posenet.evaluation.evaluate import MM_PER_CM, match_predictions
+from posenet.runtime.execution import machine_line
 from posenet.skeleton import JOINT_TYPES, JOINTS
+from posenet.synth.skeleton_full import body_frame
 
 TYPE_OF = np.array(
     [next(i for i, js in enumerate(JOINT_TYPES.values()) if j in js) for j in range(len(JOINTS))]
@@ -72,7 +72,7 @@ def corrected(pred: np.ndarray, offsets: np.ndarray) -> np.ndarray:
 
 
 def errors(pred: np.ndarray, truth: np.ndarray, valid: np.ndarray) -> dict[str, float]:
-    """Per joint type (mean of the per-joint means, as ``posenet.evaluate``) and overall MPJPE, cm."""
+    """Per joint type (mean of the per-joint means, as ``posenet.evaluation.evaluate``) and overall MPJPE, cm."""
     e = np.linalg.norm(pred - truth, axis=-1)
     out = {
         name: float(np.mean([e[valid[:, j], j].mean() for j in js if valid[:, j].any()]) / MM_PER_CM)
@@ -120,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
         description=__doc__.split("\n\n")[2], formatter_class=argparse.RawDescriptionHelpFormatter
     )
     p.add_argument("--annotations", required=True, help="MVOR-format annotation json with annotations3D")
-    p.add_argument("--predictions", required=True, help="posenet.predict's output for the same file")
+    p.add_argument("--predictions", required=True, help="posenet.evaluation.predict's output for the same file")
     p.add_argument(
         "--fit-days", type=int, nargs="+", default=[1, 2, 3], help="days the offsets are fitted on"
     )

@@ -3,10 +3,10 @@
     python benchmarks/look_factors.py --look alt --twin data/mvor_twin --full data/mvor_alt --work data/lf
 
 A look is body shapes and joint placement, clothing, light and colour camera, depth sensor and occluders
-(``posenet.data.synth.looks.PARTS``). For each part this renders MVOR's ``--days`` as the twin with only that part
-taken from ``--look`` (``python -m posenet.data.synth --from-mvor ... --look L --look-parts PART``; same poses,
+(``posenet.synth.looks.PARTS``). For each part this renders MVOR's ``--days`` as the twin with only that part
+taken from ``--look`` (``python -m posenet.synth --from-mvor ... --look L --look-parts PART``; same poses,
 rig and room: only the part changes), predicts them with ``--checkpoint`` and reference boxes
-(``posenet.predict``) and scores them (``posenet.evaluate``). The table gives per joint type and overall MPJPE
+(``posenet.evaluation.predict``) and scores them (``posenet.evaluation.evaluate``). The table gives per joint type and overall MPJPE
 (cm) for the twin, each one-part look and the whole look, with the share of the whole look's extra error that the
 part alone costs. Parts interact, so the shares need not add up to 100 %.
 
@@ -23,13 +23,13 @@ import time
 from pathlib import Path
 
 from posenet.data.mvor import load_annotations
-from posenet.data.synth import __main__ as synth
-from posenet.data.synth.looks import BODY_PARTS, LOOKS, PARTS
-from posenet.evaluate import evaluate
-from posenet.execution import machine_line
-from posenet.infer import PoseEstimator
-from posenet.predict import predict_samples, read_dataset
+from posenet.evaluation.evaluate import evaluate
+from posenet.evaluation.predict import predict_samples, read_dataset
+from posenet.net.infer import PoseEstimator
+from posenet.runtime.execution import machine_line
 from posenet.skeleton import JOINT_TYPES
+from posenet.synth import __main__ as synth
+from posenet.synth.looks import BODY_PARTS, LOOKS, PARTS
 
 DEFAULT_MVOR = os.environ.get("MVOR_ANNOTATIONS", "../shared/mvor/camma_mvor_2018.json")
 

@@ -3,9 +3,9 @@
     python benchmarks/look_transfer.py --data data/mvor_twin --cross data/mvor_alt --minutes 10 --threads 2 \
         --out runs/look_transfer
 
-For each modality (``--modalities``, default rgb, depth and rgbd) one ``python -m posenet.train --modality M
+For each modality (``--modalities``, default rgb, depth and rgbd) one ``python -m posenet.training.train --modality M
 --minutes N --clock cpu`` run on ``--data``'s days other than ``--holdout-day``, validated on that day (in-look)
-and watching the same day of ``--cross`` (cross-look, never trained on: ``posenet.train --watch``). Both figures
+and watching the same day of ``--cross`` (cross-look, never trained on: ``posenet.training.train --watch``). Both figures
 are the overall MPJPE with reference boxes at the end of the budget, from the run's log; the ratio is cross / in.
 The detector is not retrained per look (80 CPU-minutes each): ``--detector`` (default: the shipped weights) is
 scored with pycocotools on the held-out day of both looks, AP50 and AP, with their ratio.
@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--every", type=float, default=5.0, help="CPU-minutes between validations")
     p.add_argument("--threads", type=int, default=2, help="torch threads of each training run")
     p.add_argument(
-        "--train-args", default="", help="more posenet.train options for every run, e.g. '--base 24'"
+        "--train-args", default="", help="more posenet.training.train options for every run, e.g. '--base 24'"
     )
     p.add_argument("--detector", help="detector checkpoint to score on both looks (default: the shipped one)")
     p.add_argument("--no-detector", action="store_true", help="only the pose network")
@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> dict:
     args = p.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
 
-    from posenet.execution import machine_line
+    from posenet.runtime.execution import machine_line
 
     rows = pose_rows(args) + ([] if args.no_detector else detector_rows(args))
     print(machine_line(), f"(threads {args.threads}, {args.minutes:g} CPU-minutes per modality)")

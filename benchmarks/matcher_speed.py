@@ -23,8 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from test_matching import render, ring_cameras  # noqa: E402
 
-from detector.association import frame_association  # noqa: E402
-from detector.matching import match_boxes  # noqa: E402
+from pipeline.association import frame_association  # noqa: E402
+from pipeline.matching import match_boxes  # noqa: E402
 
 
 def people_grid(n: int, rng: np.random.Generator, centre_z: float) -> np.ndarray:

@@ -26,20 +26,20 @@ import time
 import numpy as np
 import torch
 
-from posenet.augment import AugmentConfig
 from posenet.cameras import Camera
-from posenet.execution import machine_line
-from posenet.infer import PoseEstimator
-from posenet.inputs import InputConfig, build_scene
-from posenet.loss import mpjpe
-from posenet.model import ModelConfig, PoseNet
-from posenet.runtime import installed
+from posenet.net.augment import AugmentConfig
+from posenet.net.infer import PoseEstimator
+from posenet.net.inputs import InputConfig, build_scene
+from posenet.net.loss import mpjpe
+from posenet.net.model import ModelConfig, PoseNet
+from posenet.runtime.execution import machine_line
+from posenet.runtime.graphs import installed
 
 PRESETS = {
     "cpu": dict(inputs=InputConfig(mode="crop", crop_size=96, extra_depth=True), base=16, depth=3),
     "paper": dict(inputs=InputConfig(mode="full", extra_depth=False), base=64, depth=4),
 }
-# the cpu preset widened (posenet.train --base 24 --init a base-16 checkpoint; docs/RESULTS.md, session 23)
+# the cpu preset widened (posenet.training.train --base 24 --init a base-16 checkpoint; docs/RESULTS.md, "What we tried")
 PRESETS["cpu-wide"] = {**PRESETS["cpu"], "base": 24}
 SETTINGS = {  # name: (precision, channels_last, backend)
     "fp32": ("fp32", False, "torch"),

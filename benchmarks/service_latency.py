@@ -5,7 +5,7 @@
     python benchmarks/service_latency.py --tiny                           # random-init models (plumbing only)
 
 It starts ``uvicorn service.app:app`` in a subprocess and posts frames of an MVOR-format dataset (by default
-the first 12 frames of the MVOR twin, rendered into a temporary folder with ``posenet.data.synth``). Four
+the first 12 frames of the MVOR twin, rendered into a temporary folder with ``posenet.synth``). Four
 configurations: a frame with 1 person and one with 3 persons, each with reference boxes (detector off) and
 with the detector on. For each it reports the client-side latency p50/p95 over ``--requests`` sequential
 requests and the server's per-stage breakdown (decode, detect, match, pose, encode), then the throughput at
@@ -40,7 +40,7 @@ sys.path.insert(0, str(REPO / "tests"))  # the test harness starts and stops the
 
 from service_harness import Server, tiny_checkpoints  # noqa: E402
 
-from detector.matching import match_boxes  # noqa: E402
+from pipeline.matching import match_boxes  # noqa: E402
 from posenet.data.images import read_depth  # noqa: E402
 from posenet.data.mvor import MvorDataset  # noqa: E402
 from service.client import scene_request  # noqa: E402
@@ -57,7 +57,7 @@ VARIANTS = {  # name: the server's environment
 
 
 def render_twin(folder: Path, annotations: Path, frames: int) -> Path:
-    cmd = [sys.executable, "-m", "posenet.data.synth", "--out", str(folder), "--from-mvor", str(annotations),
+    cmd = [sys.executable, "-m", "posenet.synth", "--out", str(folder), "--from-mvor", str(annotations),
            "--limit", str(frames), "--quiet"]  # fmt: skip
     subprocess.run(cmd, cwd=REPO, check=True, stdout=subprocess.DEVNULL)
     return folder
@@ -271,7 +271,7 @@ def run_variant(
 
 
 def format_variant(name: str, r: dict) -> str:
-    from posenet.execution import machine_line
+    from posenet.runtime.execution import machine_line
 
     runs = ", ".join(f"{x['network']} {x['backend']} {x['precision']}" for x in r["model"]["runtime"])
     lines = [f"== {name}: {runs}", machine_line(r["model"]["machine"]), ""]

@@ -4,7 +4,7 @@
     python benchmarks/smoothing_bound.py --data data/seq_eval --served S.jsonl
 
 Each ground-truth person of each frame is paired with the confirmed track the service answered nearest to it
-(optimal assignment on the mean joint distance of the smoothed joints, gated at 50 cm as ``posenet.track_eval``).
+(optimal assignment on the mean joint distance of the smoothed joints, gated at 50 cm as ``pipeline.track_eval``).
 Along each track, the raw joints (``joints``) are then smoothed by non-causal filters that see the whole track:
 centred means and Savitzky-Golay fits of several lengths (scipy), and, as an oracle, the raw joints minus the
 track's mean error against the ground truth (what remains when each person's constant offset is known). The table
@@ -24,9 +24,9 @@ import numpy as np
 from scipy.signal import savgol_filter
 from tracking import sequences, served_lines, served_tracks
 
+from pipeline.track_eval import gated_pairs
 from posenet.data.mvor import load_annotations
-from posenet.execution import machine_line
-from posenet.track_eval import gated_pairs
+from posenet.runtime.execution import machine_line
 
 MEANS = (3, 5, 9, 15)
 SAVGOL = ((9, 2), (15, 2), (31, 2))
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     p.add_argument(
-        "--data", type=Path, required=True, help="a rendered sequence (posenet.data.synth --sequence)"
+        "--data", type=Path, required=True, help="a rendered sequence (posenet.synth --sequence)"
     )
     p.add_argument(
         "--served", type=Path, required=True, help="the JSON lines of `service.client DATA --track`"

@@ -21,12 +21,12 @@ import cv2
 import numpy as np
 
 from posenet.data.images import COLOR_PNG_PARAMS, DEPTH_PNG_PARAMS
-from posenet.data.synth.looks import LOOKS, make_look
-from posenet.data.synth.procedural import procedural_frame
-from posenet.data.synth.raster import rasterize
-from posenet.data.synth.rig import random_rig
-from posenet.data.synth.scene import frame_primitives, render_frame
-from posenet.data.synth.twin import load_twin, twin_frame
+from posenet.synth.looks import LOOKS, make_look
+from posenet.synth.procedural import procedural_frame
+from posenet.synth.raster import rasterize
+from posenet.synth.rig import random_rig
+from posenet.synth.scene import frame_primitives, render_frame
+from posenet.synth.twin import load_twin, twin_frame
 
 
 class Clock:

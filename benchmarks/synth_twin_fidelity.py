@@ -1,7 +1,7 @@
 """How faithful is the MVOR twin? Compares a rendered twin with the real MVOR annotations.
 
     MVOR=../shared/mvor/camma_mvor_2018.json
-    python -m posenet.data.synth --out /tmp/mvor_twin --from-mvor $MVOR --workers 2
+    python -m posenet.synth --out /tmp/mvor_twin --from-mvor $MVOR --workers 2
     python benchmarks/synth_twin_fidelity.py --twin /tmp/mvor_twin --mvor $MVOR
 
 Reports, for the people with a 3D pose:
@@ -131,7 +131,7 @@ def dataset_stats(ann: dict) -> dict:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--twin", required=True, help="folder written by python -m posenet.data.synth --from-mvor")
+    p.add_argument("--twin", required=True, help="folder written by python -m posenet.synth --from-mvor")
     default = Path(__file__).resolve().parents[1] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
     p.add_argument("--mvor", default=str(default), help="the real MVOR annotation file")
     p.add_argument(

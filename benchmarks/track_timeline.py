@@ -5,7 +5,7 @@
 
 Each ground-truth person of the sequence gets one row per served run (the JSON lines of ``python -m
 service.client DATA --track``): a frame is coloured by the track whose smoothed joints were paired with the person
-(optimal assignment on the mean joint distance, gated at 50 cm as ``posenet.track_eval``), grey where the person
+(optimal assignment on the mean joint distance, gated at 50 cm as ``pipeline.track_eval``), grey where the person
 is in the frame and no track was, white where they are not in the frame, and lighter where the service answered
 that person as one the detector was unsure of (``unsure``). A change of colour along a row is an id switch; grey
 is a miss. The printout counts, per run, the frames covered
@@ -23,8 +23,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from tracking import sequences, served_lines, served_tracks  # noqa: E402
 
+from pipeline.track_eval import gated_pairs
 from posenet.data.mvor import load_annotations
-from posenet.track_eval import gated_pairs
 
 
 def coverage(gt: dict, lines: dict, sequence: int) -> dict[int, list[tuple[str | int | None, bool]]]:
@@ -47,7 +47,7 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     p.add_argument(
-        "--data", type=Path, required=True, help="a rendered sequence (posenet.data.synth --sequence)"
+        "--data", type=Path, required=True, help="a rendered sequence (posenet.synth --sequence)"
     )
     p.add_argument(
         "--served", type=Path, nargs="+", required=True, help="JSON lines of `service.client --track`"

@@ -1,14 +1,14 @@
-"""Tracking over rendered sequences: the pose pipeline (detector mode) per frame, then posenet.track over time.
+"""Tracking over rendered sequences: the pose pipeline (detector mode) per frame, then pipeline.track over time.
 
-    python -m posenet.data.synth --out data/seq_eval --sequence --frames 120 --persons 3 --rig mvor --look twin
+    python -m posenet.synth --out data/seq_eval --sequence --frames 120 --persons 3 --rig mvor --look twin
     python benchmarks/tracking.py --data data/seq_eval --detections runs/seq_eval_detections.jsonl
     python benchmarks/tracking.py --data data/seq_eval --served runs/seq_eval_tracks.jsonl   # through the service
 
-It runs ``service.pipeline.ScenePipeline.run(views)`` (detector mode: no boxes given, the shipped detector and
+It runs ``pipeline.two_stage.ScenePipeline.run(views)`` (detector mode: no boxes given, the shipped detector and
 pose network) on every frame of the sequences, caching each frame's persons (joints, per-joint spread in mm) in
 ``--detections`` (reused when it exists, so the tracker can be tuned without the networks), then tracks each
-sequence with :class:`posenet.track.Tracker` (persons the detector was unsure of only continue tracks; ``--set
-unsure_gate_mm=none`` ignores them) and prints :func:`posenet.track_eval.evaluate`'s figures (MOTA,
+sequence with :class:`pipeline.track.Tracker` (persons the detector was unsure of only continue tracks; ``--set
+unsure_gate_mm=none`` ignores them) and prints :func:`pipeline.track_eval.evaluate`'s figures (MOTA,
 IDF1, id switches with a 3D gate; per-frame against smoothed MPJPE; acceleration error; per-track bone-length
 standard deviation; the tracker's milliseconds per frame) against issue 15's goals. Persons in view whom the
 sequence does not annotate (a frame's ``unannotated3D``: renderer 1.2 annotates people as MVOR does) count neither
@@ -34,21 +34,21 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from pipeline.track import Tracker, TrackerConfig, mean_joint_distance, skeleton_height
+from pipeline.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
 from posenet.data.mvor import load_annotations, pose_joints, room_up
-from posenet.execution import machine_line
+from posenet.runtime.execution import machine_line
 from posenet.skeleton import NUM_JOINTS
-from posenet.track import Tracker, TrackerConfig, mean_joint_distance, skeleton_height
-from posenet.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
 
 
 def detect(
     data: Path, gt: dict, out: Path, backend: str, threads: int | None, detector: Path | None = None
 ) -> None:
     """Run the pipeline in detector mode on every frame of ``data`` and write one JSON line per frame."""
-    from posenet.predict import read_dataset
+    from pipeline.track import Tracker
+    from pipeline.two_stage import ScenePipeline
+    from posenet.evaluation.predict import read_dataset
     from posenet.scene import views_of
-    from posenet.track import Tracker
-    from service.pipeline import ScenePipeline
     from service.streams import Stream, find_up
     from service.validation import ValidatedScene
 
@@ -90,9 +90,9 @@ def detect(
 def stream_cost(data: Path, gt: dict, backend: str, threads: int | None) -> dict[int, dict]:
     """Per sequence, what tracking adds to each frame of a stream, in ms: finding the persons of unsure boxes for
     the tracker (asking it, and grouping them when it can use them: ``SceneResult.unsure_ms``) and its update."""
-    from posenet.predict import read_dataset
+    from pipeline.two_stage import ScenePipeline, TrackerQuestions
+    from posenet.evaluation.predict import read_dataset
     from posenet.scene import views_of
-    from service.pipeline import ScenePipeline, TrackerQuestions
 
     pipe = ScenePipeline.from_checkpoints(backend=backend, threads=threads)
     ds = read_dataset(data, gt, pipe.read_size)
@@ -164,7 +164,7 @@ def sequences(
     out = defaultdict(list)
     for mv in gt["multiview_images"]:
         if "sequence" not in mv:
-            raise ValueError(f"frame {mv['id']} has no 'sequence': render with posenet.data.synth --sequence")
+            raise ValueError(f"frame {mv['id']} has no 'sequence': render with posenet.synth --sequence")
         gts = poses[mv["id"]]
         det = [] if detections is None else detections[mv["id"]]["persons"]
         frame = SequenceFrame(
@@ -242,7 +242,7 @@ def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     p.add_argument(
-        "--data", type=Path, required=True, help="a rendered sequence (posenet.data.synth --sequence)"
+        "--data", type=Path, required=True, help="a rendered sequence (posenet.synth --sequence)"
     )
     p.add_argument("--annotations", type=Path, help="its annotations (default: DATA/annotations.json)")
     src = p.add_mutually_exclusive_group(required=True)

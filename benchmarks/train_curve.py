@@ -7,9 +7,9 @@
 
 Minutes are CPU-minutes (``--clock cpu``: the training process's CPU time, so a loaded, shared machine slows
 the run but does not bend its curve; with ``--threads 1``, minutes of one core). Each variant is one
-``python -m posenet.train --minutes N`` run on ``--data``'s days other than
+``python -m posenet.training.train --minutes N`` run on ``--data``'s days other than
 ``--holdout-day`` (validated on that day every ``--every`` minutes of training), run one after another so
-that they never share the cores. A variant is ``NAME=ARGS``: the extra ``posenet.train`` options of that
+that they never share the cores. A variant is ``NAME=ARGS``: the extra ``posenet.training.train`` options of that
 recipe (empty: the ``cpu`` preset as it is). Runs that exist are resumed, so an interrupted curve continues.
 Prints minutes x variant MPJPE (cm, overall), the final training loss and crops per second, writes
 ``OUT/curve.json`` and a picture ``OUT/curve.png``.
@@ -29,7 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def run(variant: str, extra: list[str], args) -> list[dict]:
     out = args.out / variant
-    cmd = [sys.executable, "-m", "posenet.train", "--data", str(args.data), "--holdout-day", str(args.holdout_day),
+    cmd = [sys.executable, "-m", "posenet.training.train", "--data", str(args.data), "--holdout-day", str(args.holdout_day),
            "--out", str(out), "--minutes", str(args.minutes), "--val-every-minutes", str(args.every),
            "--threads", str(args.threads), "--clock", "cpu"]  # fmt: skip
     cmd += ["--resume"] if (out / "last" / "train_state.pt").is_file() else extra
@@ -51,7 +51,7 @@ def picture(
         pts = [(r["minutes"], r["val_mpjpe_cm"]) for r in log if "val_mpjpe_cm" in r]
         if pts:
             line = ax.plot(*zip(*pts, strict=True), marker="o", label=f"{name}: held-out day")[0]
-        # posenet.train --watch sets (e.g. the unseen look), dashed in the same colour
+        # posenet.training.train --watch sets (e.g. the unseen look), dashed in the same colour
         watched = sorted({k for r in log for k in r if k.startswith("watch_") and k.endswith("_cm")})
         for k, style in zip(watched, ("--", ":", "-."), strict=False):
             pts = [(r["minutes"], r[k]) for r in log if k in r]
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> dict:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
     p.add_argument("--data", type=Path, help="MVOR-format dataset (train days + held-out day)")
     p.add_argument("--from-runs", type=Path, nargs="+", metavar="RUN",
-                   help="instead of training: print and draw the logs of these posenet.train run folders "
+                   help="instead of training: print and draw the logs of these posenet.training.train run folders "
                    "(e.g. a --minutes run with --watch sets)")  # fmt: skip
     p.add_argument("--holdout-day", type=int, default=4)
     p.add_argument("--minutes", type=float, default=30.0, help="training budget of each variant")
@@ -83,8 +83,8 @@ def main(argv: list[str] | None = None) -> dict:
     args.out.mkdir(parents=True, exist_ok=True)
     variants = dict(v.split("=", 1) for v in (args.variant or ["cpu="]))
 
-    from posenet.checkpoint import training_config
-    from posenet.execution import machine_line
+    from posenet.net.checkpoint import training_config
+    from posenet.runtime.execution import machine_line
 
     if args.from_runs:
         curves = {

@@ -1,4 +1,4 @@
-"""Detector checkpoints, in the layout both stages share (``posenet.checkpoint_files``): ``model.safetensors`` +
+"""Detector checkpoints, in the layout both stages share (``posenet.net.checkpoint_files``): ``model.safetensors`` +
 ``config.json`` (+ ``train_state.pt`` for resuming).
 
 ``config.json`` holds ``"model"``: the resolved ``DetectorConfig`` (architecture and preprocessing); ``"train"``:
@@ -19,7 +19,7 @@ from safetensors.torch import load_file
 from transformers import DetrForObjectDetection
 
 from detector.model import DetectorConfig, arch_classes, from_detr_config
-from posenet.checkpoint_files import checkpoint_config, files, read_config, write_checkpoint
+from posenet.net.checkpoint_files import checkpoint_config, files, read_config, write_checkpoint
 
 PRECISIONS = ("float32", "float16", "int8")
 INT8_SCALE = ".int8_scale"  # key suffix of the per-output-channel scales of an int8 weight

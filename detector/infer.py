@@ -6,8 +6,8 @@
     detections[v].scores  # (K,)
 
 All views go through DETR in one batched forward pass under ``torch.inference_mode``: on torch (channels_last,
-bf16 autocast only where this machine computes bf16 natively, ``posenet.execution``) or on an inference runtime
-(``backend``, ``posenet.runtime``), which runs a graph exported from the same weights.
+bf16 autocast only where this machine computes bf16 natively, ``posenet.runtime.execution``) or on an inference runtime
+(``backend``, ``posenet.runtime.graphs``), which runs a graph exported from the same weights.
 
 Where the time went (``torch.profiler``, RT-DETR ``cpu`` preset, 3 views of 160x120): 70 % in the ResNet's 62
 convolutions, then max-pool and batch norm. channels_last removes oneDNN's reorders of NCHW activations (20.2 ->
@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,24 +28,12 @@ from torchvision.ops import nms
 from detector.checkpoint import load_checkpoint
 from detector.inputs import prepare_views
 from detector.model import DetectorConfig
+from detector.protocol import Detections
 from posenet.boxes import clip_xyxy, cxcywh_norm_to_xyxy, scale_xyxy
-from posenet.execution import Precision, resolve_precision
-from posenet.runtime import Backend, OnnxRunner, export_onnx, load_runner
+from posenet.runtime.execution import Precision, resolve_precision
+from posenet.runtime.graphs import Backend, OnnxRunner, export_onnx, load_runner
 
 DEFAULT_WEIGHTS = Path(__file__).parent / "weights" / "default.safetensors"
-
-
-@dataclass
-class Detections:
-    """The persons found in one view.
-
-    Attributes:
-        boxes: (K, 4) float32 xyxy pixels of the view's image (``posenet.boxes``' convention).
-        scores: (K,) float32 probability of "person", sorted from high to low.
-    """
-
-    boxes: np.ndarray
-    scores: np.ndarray
 
 
 def decode(
@@ -104,8 +91,8 @@ class PersonDetector:
 
     Args:
         precision: ``auto`` (bf16 only where this machine computes it natively), ``fp32``, ``bf16``, or ``int8``
-            (OpenVINO only: ``posenet.quantize``).
-        backend: ``torch`` (default), ``onnxruntime``, ``openvino`` or ``auto`` (``posenet.runtime``).
+            (OpenVINO only: ``posenet.runtime.quantize``).
+        backend: ``torch`` (default), ``onnxruntime``, ``openvino`` or ``auto`` (``posenet.runtime.graphs``).
         threads: the runtime's intra-op threads (default: torch's).
     """
 
@@ -144,8 +131,8 @@ class PersonDetector:
         return self.backend
 
     def _calibration_inputs(self, runner) -> list[dict]:
-        """The network's inputs on the int8 calibration scenes (``posenet.quantize``), run by ``runner``."""
-        from posenet.quantize import Recorder, calibration_samples
+        """The network's inputs on the int8 calibration scenes (``posenet.runtime.quantize``), run by ``runner``."""
+        from posenet.runtime.quantize import Recorder, calibration_samples
 
         recorder = self.runner = Recorder(runner)
         try:
@@ -203,6 +190,14 @@ class PersonDetector:
                 )
         model, cfg, _ = load_checkpoint(path, device)
         return cls(model, cfg, device, precision, backend, threads)
+
+    @property
+    def score_threshold(self) -> float:
+        return self.cfg.score_threshold
+
+    @property
+    def input_width(self) -> int:
+        return self.cfg.input_width
 
     @property
     def needs_depth(self) -> bool:

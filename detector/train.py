@@ -7,7 +7,7 @@
 
 Trains on every day but the held-out one. After each epoch it writes ``RUN/model.safetensors``,
 ``RUN/config.json`` (the resolved detector + training config, what it was trained on and the progress; the layout
-of ``posenet.checkpoint_files``) and ``RUN/train_state.pt``
+of ``posenet.net.checkpoint_files``) and ``RUN/train_state.pt``
 (optimiser, schedule, RNG, for ``--resume``), evaluates COCO AP on the held-out day, and appends a line to
 ``RUN/log.jsonl``. The ``paper`` preset's defaults are the paper's: 10 epochs, batch 2, lr 1e-4, backbone lr
 1e-5, weight decay 1e-4.
@@ -36,8 +36,8 @@ from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
 from detector.model import ARCHS, DetectorConfig, build_detector, param_groups, preset
 from detector.predict import predict_records
-from posenet.checkpoint_files import train_state_file
 from posenet.data.mvor import read_annotation_json
+from posenet.net.checkpoint_files import train_state_file
 
 
 @dataclass

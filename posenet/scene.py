@@ -2,8 +2,8 @@
 
 Every path to the pose network builds a :class:`Scene`: the dataset readers' samples (:meth:`Scene.from_sample`,
 training, validation, offline prediction), the service's requests and the cross-view matchers (per person, V
-boxes or None: :meth:`Scene.from_person_boxes`). ``posenet.infer.PoseEstimator.predict`` takes it, and
-``posenet.inputs.build_scene`` turns its views and boxes into the network's inputs.
+boxes or None: :meth:`Scene.from_person_boxes`). ``posenet.net.infer.PoseEstimator.predict`` takes it, and
+``posenet.net.inputs.build_scene`` turns its views and boxes into the network's inputs.
 
 Pixels and boxes follow ``posenet.boxes`` (xyxy, origin at the centre of the top-left pixel); cameras,
 millimetres and frames follow ``posenet.cameras``.

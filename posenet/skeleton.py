@@ -27,7 +27,7 @@ BONES: tuple[tuple[int, int], ...] = (
 )  # fmt: skip
 
 # A typical adult's bone lengths in mm, in the order of BONES: the medians over the 1,061 3D poses of the real MVOR
-# annotation (camma_mvor_2018.json), left and right averaged. Only their proportions are used (posenet.track
+# annotation (camma_mvor_2018.json), left and right averaged. Only their proportions are used (pipeline.track
 # scales them to each person).
 BONE_TEMPLATE_MM: tuple[float, ...] = (116.0, 190.5, 251.0, 409.0, 188.0, 190.5, 409.0, 251.0, 188.0, 320.0)
 

@@ -16,11 +16,11 @@ from fastapi import FastAPI, Request
 from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
 
-from detector.skeleton_matching import SkeletonMatchConfig
-from posenet.track import Tracker, TrackerConfig
+from pipeline.skeleton_matching import SkeletonMatchConfig
+from pipeline.track import Tracker, TrackerConfig
+from pipeline.two_stage import PipelineConfig, ScenePipeline
 from service.errors import InputError
 from service.limits import BodyLimitMiddleware, InFlightLimiter
-from service.pipeline import PipelineConfig, ScenePipeline
 from service.routes import docs_router, protected, public
 from service.schemas import SceneIn
 from service.settings import Settings

@@ -7,8 +7,8 @@ A thread cannot be killed, and a torch op cannot be interrupted from outside. Tw
 - between layers (building the crops, lifting and aggregating), :meth:`CancelToken.cancel` raises
   :class:`Cancelled` asynchronously in the worker thread (``PyThreadState_SetAsyncExc``), which Python
   delivers at the thread's next bytecode, that is when the current torch op returns;
-- a network run by an inference runtime (``posenet.runtime``: OpenVINO, ONNX Runtime) is one long call, which
-  :func:`posenet.runtime.stop_call` ends (OpenVINO cancels the request, ONNX Runtime sets ``terminate``).
+- a network run by an inference runtime (``posenet.runtime.graphs``: OpenVINO, ONNX Runtime) is one long call, which
+  :func:`posenet.runtime.graphs.stop_call` ends (OpenVINO cancels the request, ONNX Runtime sets ``terminate``).
 
 So the work stops within one op or layer of the disconnect, not at the end of the frame. Both act only on a
 call run by :meth:`CancelToken.run`: other code and other threads (training, offline evaluation) are never
@@ -32,7 +32,7 @@ import anyio
 import torch
 from starlette.types import Receive
 
-from posenet.runtime import stop_call
+from posenet.runtime.graphs import stop_call
 
 T = TypeVar("T")
 _log = logging.getLogger("uvicorn.error")  # uvicorn's own log: shown at INFO with the default log config

@@ -4,7 +4,7 @@
         --out results.jsonl [--concurrency 4] [--reference-boxes] [--days 4] [--evaluate] [--token T]
     python -m service.client RECORDING_DIR --url http://localhost:8000 --out results.jsonl   # rig.json + cam*/
     python -m service.client SEQUENCES_DIR --annotations A.json --out tracks.jsonl --track \
-        [--export-easymocap DIR] [--export-csv tracks.csv]      # posenet.data.synth --sequence output
+        [--export-easymocap DIR] [--export-csv tracks.csv]      # posenet.synth --sequence output
 
 Each finished frame is appended to ``--out`` as one line, flushed and fsynced, so a killed run loses at most
 the frames in flight. A restarted run skips the frames already in the file (a line cut short by the kill is
@@ -15,7 +15,7 @@ retries it. A frame the server rejects (4xx) is written with its error and count
 Image files are sent as they are on disk (no decoding or re-encoding): ``dayD/camC/color/N.png`` and the
 16-bit depth beside it in ``depth/``. With ``--reference-boxes`` the annotated boxes that have a person id are
 sent with those ids (the paper's reference-box setting, detection skipped). ``--evaluate`` scores the whole
-output file with ``posenet.evaluate``; in detector mode each returned person is first given the ground-truth
+output file with ``posenet.evaluation.evaluate``; in detector mode each returned person is first given the ground-truth
 id whose boxes it overlaps most (mean IoU over the views, as in the paper; MVOR's box-only people compete).
 
 ``--track`` sends each sequence's frames (the ``sequence``, ``frame_index`` and ``timestamp_s`` of each
@@ -50,7 +50,7 @@ from posenet.boxes import ground_truth_ids, identified
 from posenet.data.images import depth_file_name
 from posenet.data.mvor import MvorDataset, load_annotations
 from posenet.data.sample import Sample
-from posenet.evaluate import prediction_record
+from posenet.evaluation.evaluate import prediction_record
 
 RETRY_STATUSES = {429, 502, 503, 504}
 
@@ -189,7 +189,7 @@ def append_line(f, line: dict) -> None:
 
 # ----------------------------------------------------------------------------------------------- evaluation
 def predictions(lines: dict[str, dict], dataset: MvorDataset) -> list[dict]:
-    """The output's persons in ``posenet.evaluate``'s format; detector-mode ids are associated by box IoU."""
+    """The output's persons in ``posenet.evaluation.evaluate``'s format; detector-mode ids are associated by box IoU."""
     by_id = {sample_id: i for i, sample_id in enumerate(dataset.ids)}
     preds = []
     for frame_id, line in lines.items():
@@ -326,7 +326,7 @@ class SequenceFrame(NamedTuple):
 
 def sequence_frames(gt: dict, dataset: MvorDataset) -> dict[int, list[SequenceFrame]]:
     """Per sequence, its frames of ``dataset`` in time order, from the ``sequence``, ``frame_index`` and
-    ``timestamp_s`` of each multi-view frame (``posenet.data.synth --sequence`` writes them)."""
+    ``timestamp_s`` of each multi-view frame (``posenet.synth --sequence`` writes them)."""
     index = {frame_id: i for i, frame_id in enumerate(dataset.ids)}
     out: dict[int, list[SequenceFrame]] = {}
     for mv in gt["multiview_images"]:
@@ -335,7 +335,7 @@ def sequence_frames(gt: dict, dataset: MvorDataset) -> dict[int, list[SequenceFr
         if not {"sequence", "frame_index", "timestamp_s"} <= mv.keys():
             raise SystemExit(
                 f"error: frame {mv['id']} has no sequence, frame_index and timestamp_s, which --track needs: "
-                "render sequences with python -m posenet.data.synth --sequence"
+                "render sequences with python -m posenet.synth --sequence"
             )
         frame = SequenceFrame(
             index[mv["id"]], int(mv["sequence"]), int(mv["frame_index"]), float(mv["timestamp_s"])
@@ -459,7 +459,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--token", default=os.environ.get("ORPOSE_TOKEN"), help="bearer token (env ORPOSE_TOKEN)"
     )
-    track = parser.add_argument_group("tracking (sequences rendered by posenet.data.synth --sequence)")
+    track = parser.add_argument_group("tracking (sequences rendered by posenet.synth --sequence)")
     track.add_argument(
         "--track",
         action="store_true",
@@ -531,7 +531,7 @@ def main(argv: list[str] | None = None) -> int:
             n = export_csv(frames, args.export_csv)
             print(f"CSV: {n} rows in {args.export_csv}")
     if args.evaluate:
-        from posenet.evaluate import evaluate, format_tables
+        from posenet.evaluation.evaluate import evaluate, format_tables
 
         preds = predictions(read_done(args.out), dataset)
         print(format_tables(evaluate(gt, preds, image_ids=set(dataset.ids))))

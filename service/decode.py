@@ -3,7 +3,7 @@
 Sizes are read from the file header *before* decoding, so that a small, highly compressed image cannot make
 the server allocate gigabytes. Frames are decoded in memory only; nothing is written to disk or logged.
 
-**At the resolution the models read** (``reduce`` k, from ``posenet.inputs.reduction``): when a view is an exact
+**At the resolution the models read** (``reduce`` k, from ``posenet.net.inputs.reduction``): when a view is an exact
 multiple k of what the networks read (640x480 against the pose network's 320x240), it is brought to 1/k right here, in the
 decoding threads, with the reader's own functions (block mean for colour, lower median of the valid depths), so
 that every later stage handles a quarter of the pixels and a served frame meets the network exactly as in
@@ -100,7 +100,7 @@ def decode_color(
     data: bytes, name: str = "color", max_pixels: int = 1920 * 1200, reduce: int = 1
 ) -> np.ndarray:
     """A colour PNG or JPEG to ``(H / reduce, W / reduce, 3)`` uint8 RGB (grey images are expanded to three
-    channels). ``reduce`` must divide both sides (``posenet.inputs.reduction``)."""
+    channels). ``reduce`` must divide both sides (``posenet.net.inputs.reduction``)."""
     size = _checked_size(data, name, max_pixels)
     if reduce > 1 and image_format(data) == "jpeg":
         bgr = _decode(data, name, _REDUCED_COLOR[reduce], (size[0] // reduce, size[1] // reduce))

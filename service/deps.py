@@ -11,7 +11,7 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from service.pipeline import ScenePipeline
+from pipeline.two_stage import ScenePipeline
 from service.settings import Settings
 from service.streams import StreamRegistry
 

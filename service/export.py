@@ -6,7 +6,7 @@ start otherwise): the shipped weights by default, or the checkpoints the service
     python -m service.export --int8                            # also the int8 graphs (ORPOSE_PRECISION=int8)
     ORPOSE_CACHE_DIR=/models/onnx uvicorn service.app:app      # then finds them there
 
-Each graph is named by a hash of its weights, config and exporter (``posenet.runtime``), so the service only
+Each graph is named by a hash of its weights, config and exporter (``posenet.runtime.graphs``), so the service only
 ever picks up a graph built from the very weights it loads. Prints one JSON line per graph, with its
 parity against torch on blank and random inputs.
 """
@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--no-detector", action="store_true", help="only the pose network")
     p.add_argument(
         "--int8", action="store_true",
-        help="also the int8 OpenVINO graphs (ORPOSE_PRECISION=int8; posenet.quantize): renders the calibration "
+        help="also the int8 OpenVINO graphs (ORPOSE_PRECISION=int8; posenet.runtime.quantize): renders the calibration "
         "scenes and quantizes, about a minute",
     )  # fmt: skip
     p.add_argument(
@@ -45,8 +45,8 @@ def main(argv: list[str] | None = None) -> int:
         os.environ["ORPOSE_CACHE_DIR"] = str(args.cache_dir)
 
     from detector.infer import PersonDetector
-    from posenet.infer import PoseEstimator
-    from posenet.runtime import OnnxRunner, cache_dir
+    from posenet.net.infer import PoseEstimator
+    from posenet.runtime.graphs import OnnxRunner, cache_dir
 
     torch.manual_seed(0)
     pose = PoseEstimator.from_checkpoint(args.pose_checkpoint, precision="fp32")

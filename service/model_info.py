@@ -2,14 +2,14 @@
 
 The training data is read from the checkpoints' own configs (the resolved config saved beside the weights), so
 the answer describes the weights actually loaded rather than what a deployment claims: their ``"trained_on"``
-section (``posenet.checkpoint_files``), written by ``posenet.train``, ``posenet.adapt`` and ``detector.train``.
+section (``posenet.net.checkpoint_files``), written by ``posenet.training.train``, ``posenet.training.adapt`` and ``detector.train``.
 """
 
 from __future__ import annotations
 
-from posenet.execution import machine
+from pipeline.two_stage import ScenePipeline
+from posenet.runtime.execution import machine
 from posenet.skeleton import JOINTS
-from service.pipeline import ScenePipeline
 from service.schemas import ModelInfo, Runtime
 
 # Checkpoints from before the shared layout (no "trained_on" section): the config keys that say what a model saw

@@ -16,10 +16,10 @@ import time
 
 import numpy as np
 
+from pipeline.two_stage import PersonResult, SceneResult
 from posenet.boxes import hull
 from posenet.skeleton import JOINTS
 from service.errors import InputError
-from service.pipeline import PersonResult, SceneResult
 from service.schemas import Joint, Person, SceneOut, Support, Timings
 from service.validation import ValidatedScene
 

@@ -21,11 +21,11 @@ from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 from starlette.requests import ClientDisconnect
 
+from pipeline.two_stage import ScenePipeline, SceneResult
 from service.cancel import ClientGone, run_until_disconnected
 from service.deps import PipelineDep, SettingsDep, StreamsDep, inference_slot, require_token
 from service.errors import UNSUPPORTED_MEDIA, InputError
 from service.model_info import model_info
-from service.pipeline import ScenePipeline, SceneResult
 from service.response import encode
 from service.schemas import Error, Health, ModelInfo, Ready, SceneOut, StreamEnded, StreamFrameOut
 from service.settings import Settings

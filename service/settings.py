@@ -12,8 +12,8 @@ from typing import Literal
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from detector.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig
-from posenet.track import TrackerConfig
+from pipeline.skeleton_matching import CANDIDATE_SCORE, SkeletonMatchConfig
+from pipeline.track import TrackerConfig
 
 
 class Settings(BaseSettings):
@@ -21,28 +21,28 @@ class Settings(BaseSettings):
 
     model_config = SettingsConfigDict(env_prefix="ORPOSE_", extra="ignore")
 
-    # None means the default weights shipped with the package (see posenet.infer / detector.infer).
+    # None means the default weights shipped with the package (see posenet.net.infer / detector.infer).
     pose_checkpoint: Path | None = Field(
         None, description="pose network checkpoint; unset = the shipped weights"
     )
     detector_checkpoint: Path | None = Field(None, description="DETR checkpoint; unset = the shipped weights")
     device: str = Field("cpu", description="torch device for both models, e.g. 'cpu' or 'cuda:0'")
-    # Chosen for the machine that serves, never by the one that trained (posenet.execution): bf16 only where it is
+    # Chosen for the machine that serves, never by the one that trained (posenet.runtime.execution): bf16 only where it is
     # native (AVX512-BF16, AMX, a GPU); on AVX2-only CPUs bf16 is emulated and 7-20x slower than fp32.
-    # int8 (posenet.quantize): both networks quantized for OpenVINO, the fastest on AVX2-only CPUs; never auto.
+    # int8 (posenet.runtime.quantize): both networks quantized for OpenVINO, the fastest on AVX2-only CPUs; never auto.
     precision: Literal["auto", "fp32", "bf16", "int8"] = Field(
         "auto",
         description="model precision: auto (bf16 only where the device computes it natively), fp32, bf16, or "
         "int8 (OpenVINO's quantized graphs, calibrated on rendered scenes at first start)",
     )
-    # posenet.runtime: the ONNX graphs are exported from the loaded weights at start-up and cached in
+    # posenet.runtime.graphs: the ONNX graphs are exported from the loaded weights at start-up and cached in
     # $ORPOSE_CACHE_DIR (default ~/.cache/or-pose); `python -m service.export` builds them ahead of time.
     backend: Literal["auto", "torch", "onnxruntime", "openvino"] = Field(
         "auto",
         description="inference runtime of both networks: auto (openvino, else onnxruntime, else torch)",
     )
     threads: int = Field(2, ge=1, le=256, description="torch intra-op threads (torch.set_num_threads)")
-    # posenet.infer.PoseEstimator.from_checkpoint(flip_test=): on the unseen alt look's day 4 the mirrored pass
+    # posenet.net.infer.PoseEstimator.from_checkpoint(flip_test=): on the unseen alt look's day 4 the mirrored pass
     # gained 0.3 cm (7.52 -> 7.21), on the twin 0.1 (docs/RESULTS.md); it doubles the pose stage's U-Net work.
     flip_test: bool | None = Field(
         None,
@@ -70,7 +70,7 @@ class Settings(BaseSettings):
         description="most persons x views x network-input pixels per frame (beyond it: 422 with boxes, "
         "the best-supported persons that fit in detector mode)",
     )
-    # detector.skeleton_matching: group boxes by each box's single-view skeleton from the pose network instead
+    # pipeline.skeleton_matching: group boxes by each box's single-view skeleton from the pose network instead
     # of the paper's box centres (measured better on day 4 of both looks, docs/detector.md); centres for the
     # paper's ablation.
     matcher: Literal["centres", "skeletons", "skeletons-greedy"] = Field(
@@ -79,7 +79,7 @@ class Settings(BaseSettings):
         "centres, 75 cm), skeletons (each box's single-view 3D skeleton, one optimal partition per frame) or "
         "skeletons-greedy (the same skeletons, the paper's greedy rule)",
     )
-    # detector.skeleton_matching, step 5: boxes the detector was unsure of may complete a person seen in other
+    # pipeline.skeleton_matching, step 5: boxes the detector was unsure of may complete a person seen in other
     # views (never start one). 1 (or any value at or above the detector's threshold) uses sure boxes only.
     candidate_score: float = Field(
         CANDIDATE_SCORE,
@@ -88,7 +88,7 @@ class Settings(BaseSettings):
         description="detector mode, skeleton matcher: boxes scored from this up to the detector's threshold "
         "may complete a person seen in other views (1: only the detector's sure boxes)",
     )
-    # detector.skeleton_matching, step 7: a person only one view saw is dropped when another view sees its
+    # pipeline.skeleton_matching, step 7: a person only one view saw is dropped when another view sees its
     # joints in free space with no box there. 0 turns it off (depth that cannot be trusted to show free space).
     free_space_mm: float = Field(
         SkeletonMatchConfig.free_space_mm,
@@ -114,14 +114,14 @@ class Settings(BaseSettings):
     stream_idle_s: float = Field(
         60.0, gt=0, le=86400, description="a stream that gets no frame for this long ends (expires)"
     )
-    # posenet.track.TrackerConfig.max_spread_mm, chosen on rendered sequences with the shipped weights; another
+    # pipeline.track.TrackerConfig.max_spread_mm, chosen on rendered sequences with the shipped weights; another
     # checkpoint spreads its joints differently (random weights: ~1000 mm) and may need another value.
     track_max_spread_mm: float = Field(
         TrackerConfig.max_spread_mm,
         gt=0,
         description="persons whose median joint spread is above this many mm are answered without a track",
     )
-    # posenet.track.TrackerConfig.min_torso_mm: shorter torsos (neck to mid-hip) are no adult's; on rendered
+    # pipeline.track.TrackerConfig.min_torso_mm: shorter torsos (neck to mid-hip) are no adult's; on rendered
     # sequences they are the pose network's folded guess at the draped patient.
     track_min_torso_mm: float = Field(
         TrackerConfig.min_torso_mm,
@@ -130,7 +130,7 @@ class Settings(BaseSettings):
         description="persons whose torso (neck to the middle of the hips) is shorter than this many mm are "
         "answered without a track (0 tracks every torso)",
     )
-    # posenet.track.TrackerConfig.min_height_mm: with the room's up direction sent in the scene ("up"), a skeleton
+    # pipeline.track.TrackerConfig.min_height_mm: with the room's up direction sent in the scene ("up"), a skeleton
     # spanning less than this along it lies down (on rendered sequences, the patient on the table).
     track_min_height_mm: float = Field(
         TrackerConfig.min_height_mm,
@@ -139,7 +139,7 @@ class Settings(BaseSettings):
         description="streams, for scenes that give the room's up direction: persons whose skeleton spans less "
         "than this many mm along it (lying down, e.g. the patient) are answered without a track (0 tracks all)",
     )
-    # posenet.track.TrackerConfig.lying_height_mm / lying_spread_mm: a track whose first frames both span little
+    # pipeline.track.TrackerConfig.lying_height_mm / lying_spread_mm: a track whose first frames both span little
     # along up and are unsure (the draped patient, half unfolded by the pose network) waits for confirmation.
     track_lying_height_mm: float = Field(
         TrackerConfig.lying_height_mm,
@@ -155,7 +155,7 @@ class Settings(BaseSettings):
         description="streams: the spread (mm) above which a low new track counts as lying "
         "(ORPOSE_TRACK_LYING_HEIGHT_MM)",
     )
-    # posenet.track.TrackerConfig.max_coast_s: a confirmed track whose person no frame shows coasts this long, and
+    # pipeline.track.TrackerConfig.max_coast_s: a confirmed track whose person no frame shows coasts this long, and
     # takes the person back when they reappear near where it predicts them; after it, they get a new id.
     track_max_coast_s: float = Field(
         TrackerConfig.max_coast_s,
@@ -171,8 +171,8 @@ class Settings(BaseSettings):
         description="streams, for scenes that give no up: take the room's up from the floor seen in the depth "
         "images (found once per stream and rig), so that persons lying down are left untracked there too",
     )
-    # posenet.track.TrackerConfig.unsure_gate_mm: persons of boxes the detector was unsure of in every view
-    # (detector.skeleton_matching.group_unsure) may continue a track this close to it, never start one.
+    # pipeline.track.TrackerConfig.unsure_gate_mm: persons of boxes the detector was unsure of in every view
+    # (pipeline.skeleton_matching.group_unsure) may continue a track this close to it, never start one.
     track_unsure_gate_mm: float = Field(
         TrackerConfig.unsure_gate_mm,
         ge=0,

@@ -1,4 +1,4 @@
-"""Streams: a client's frames over time, each answered with its persons' tracks (``posenet.track.Tracker``).
+"""Streams: a client's frames over time, each answered with its persons' tracks (``pipeline.track.Tracker``).
 
 A stream is named by the client (``POST /streams/{stream_id}/frames``) and starts with its first frame. Each
 frame goes through the same form reading, validation and pipeline as ``POST /scenes``
@@ -40,11 +40,11 @@ import numpy as np
 import torch
 from fastapi import HTTPException
 
+from pipeline.track import Tracker
+from pipeline.two_stage import SceneResult, TrackerQuestions
 from posenet.rig.check import floor_of_frame
 from posenet.skeleton import JOINTS
-from posenet.track import Tracker
 from service.errors import InputError
-from service.pipeline import SceneResult, TrackerQuestions
 from service.response import scene_out, serialise
 from service.schemas import (
     SmoothedJoint,

@@ -17,7 +17,7 @@ import pydantic
 import torch
 
 from posenet.cameras import Camera, is_rigid
-from posenet.inputs import reduction
+from posenet.net.inputs import reduction
 from posenet.scene import SceneView
 from service.decode import decode_color, decode_depth, header_size
 from service.errors import InputError
@@ -32,13 +32,13 @@ class Limits:
     max_image_pixels: int = 1920 * 1200
     max_boxes_per_view: int = 64
     # (W, H) that the models read (ScenePipeline.read_size): views that are an exact multiple of it are decoded
-    # at that resolution (posenet.inputs.reduction); None keeps every view as sent.
+    # at that resolution (posenet.net.inputs.reduction); None keeps every view as sent.
     read_size: tuple[int, int] | None = None
 
 
 @dataclass
 class ValidatedScene:
-    """A request ready for :meth:`service.pipeline.ScenePipeline.run`.
+    """A request ready for :meth:`pipeline.two_stage.ScenePipeline.run`.
 
     Attributes:
         views: V :class:`posenet.scene.SceneView`\\ s (colour (H, W, 3) uint8 RGB or None, depth (H, W) uint16 mm,
@@ -129,7 +129,7 @@ def _boxes(
 
 
 # OpenCV's decoders release the GIL: the images of a frame decode in parallel (3 views: ~2x faster on 2 cores).
-# One thread per core, at most 4: on 2 cores 4 threads were slower than 2 (6.9 against 6.3 ms a frame, session 9).
+# One thread per core, at most 4: on 2 cores 4 threads were slower than 2 (6.9 against 6.3 ms a frame, 2026-11-30).
 _DECODERS = ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 2), thread_name_prefix="decode")
 
 

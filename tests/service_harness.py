@@ -30,8 +30,8 @@ def tiny_checkpoints(folder: Path, seed: int = 0, detector: bool = True) -> tupl
     Returns the (pose, detector or None) checkpoint paths."""
     from detector.checkpoint import save_checkpoint as save_detector
     from detector.model import build_detector, preset
-    from posenet.checkpoint import save_checkpoint as save_pose
-    from posenet.model import ModelConfig, PoseNet
+    from posenet.net.checkpoint import save_checkpoint as save_pose
+    from posenet.net.model import ModelConfig, PoseNet
 
     torch.manual_seed(seed)
     pose_cfg = ModelConfig()

@@ -1,4 +1,4 @@
-"""posenet.adapt: unsupervised adaptation never reads the target's 3D poses, its losses, the EMA teacher, resume,
+"""posenet.training.adapt: unsupervised adaptation never reads the target's 3D poses, its losses, the EMA teacher, resume,
 and that its checkpoint loads where every other pose checkpoint does. Tiny rendered scenes (tests/tiny_scenes.py),
 a tiny U-Net, one thread: seconds."""
 
@@ -11,10 +11,19 @@ import pytest
 import torch
 from tiny_scenes import write_dataset
 
-from posenet import lifting
-from posenet.adapt import AdaptConfig, adapt_step, load_target_annotations
-from posenet.adapt import main as adapt_main
-from posenet.adapt_losses import (
+from posenet.data.mvor import MvorDataset, load_annotations
+from posenet.net import lifting
+from posenet.net.augment import AugmentConfig
+from posenet.net.checkpoint import save_checkpoint
+from posenet.net.infer import PoseEstimator
+from posenet.net.inputs import InputConfig, build_scene
+from posenet.net.loss import mpjpe
+from posenet.net.model import ModelConfig, PoseNet, PoseOutput
+from posenet.scene import Scene, views_of
+from posenet.skeleton import BONES
+from posenet.training.adapt import AdaptConfig, adapt_step, load_target_annotations
+from posenet.training.adapt import main as adapt_main
+from posenet.training.adapt_losses import (
     bone_lengths,
     bone_loss,
     bone_statistics,
@@ -23,15 +32,6 @@ from posenet.adapt_losses import (
     pseudo_labels,
     view_consistency,
 )
-from posenet.augment import AugmentConfig
-from posenet.checkpoint import save_checkpoint
-from posenet.data.mvor import MvorDataset, load_annotations
-from posenet.infer import PoseEstimator
-from posenet.inputs import InputConfig, build_scene
-from posenet.loss import mpjpe
-from posenet.model import ModelConfig, PoseNet, PoseOutput
-from posenet.scene import Scene, views_of
-from posenet.skeleton import BONES
 
 TINY_MODEL = ModelConfig(inputs=InputConfig(crop_size=32), base=8, depth=2, precision="fp32")
 RUN = ["--subsample", "1", "--threads", "1", "--scenes-per-step", "2", "--source-per-step", "1"]
@@ -95,7 +95,7 @@ def test_a_file_without_3d_poses_adapts_and_gives_the_same_weights(tiny, tmp_pat
 
 def test_the_default_read_size_needs_no_3d_poses(tiny, tmp_path):
     """Without --subsample the read size comes from the file's cameras alone; it used to need annotations3D."""
-    from posenet.predict import read_subsample
+    from posenet.evaluation.predict import read_subsample
 
     args = _args(tiny, tmp_path / "run", "no3d", "--epochs", "1")
     del args[args.index("--subsample") : args.index("--subsample") + 2]
@@ -306,7 +306,7 @@ def test_the_result_loads_like_any_pose_checkpoint(tiny, tmp_path, monkeypatch):
     pred = PoseEstimator.from_checkpoint(run, precision="fp32").predict(scene)
     assert pred.joints.shape == (1, 10, 3) and torch.isfinite(pred.joints).all()
     # the service: ORPOSE_POSE_CHECKPOINT=RUN
-    from service.pipeline import ScenePipeline
+    from pipeline.two_stage import ScenePipeline
     from service.settings import Settings
 
     monkeypatch.setenv("ORPOSE_POSE_CHECKPOINT", str(run))
@@ -315,8 +315,8 @@ def test_the_result_loads_like_any_pose_checkpoint(tiny, tmp_path, monkeypatch):
     )
     served = pipeline.pose.predict(scene)
     torch.testing.assert_close(served.joints, pred.joints)
-    # posenet.predict
-    from posenet.predict import main as predict_main
+    # posenet.evaluation.predict
+    from posenet.evaluation.predict import main as predict_main
 
     out = tmp_path / "pred.json"
     assert predict_main(["--data", str(tiny["target"]), "--annotations", str(tiny["with3d"]), "--checkpoint", str(run),
@@ -332,7 +332,7 @@ def test_detector_boxes_replace_the_files_boxes(tiny, tmp_path):
     path = tmp_path / "boxes.json"
     path.write_text(json.dumps(boxes))
     cfg = AdaptConfig(str(tiny["target"]), "unused", annotations=str(tiny["no3d"]), boxes="detector")
-    with pytest.raises(FileNotFoundError, match="detector.group"):
+    with pytest.raises(FileNotFoundError, match="pipeline.group"):
         load_target_annotations(cfg)
     cfg.detector_boxes = str(path)
     assert {b["person_id"] for b in load_target_annotations(cfg)["annotations"]} == {7, 8}
@@ -342,9 +342,9 @@ def test_detector_boxes_replace_the_files_boxes(tiny, tmp_path):
 
 
 def test_reader_subsampling_defaults_to_what_the_network_reads(mvor_annotations):
-    """Without --subsample, posenet.adapt reads views as posenet.predict and the service do: at the network's
+    """Without --subsample, posenet.training.adapt reads views as posenet.evaluation.predict and the service do: at the network's
     recorded read size (MVOR's 640x480 views at 320x240: every 2nd pixel), not at a default of its own."""
-    from posenet.predict import read_subsample
+    from posenet.evaluation.predict import read_subsample
 
     assert read_subsample(mvor_annotations, InputConfig(source_size=(320, 240))) == 2
     assert read_subsample(mvor_annotations, InputConfig(source_size=(160, 120))) == 4

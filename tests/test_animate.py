@@ -1,4 +1,4 @@
-"""posenet.animate on a sequence rendered by posenet.data.synth --sequence (3 frames, 2 persons, 2 views).
+"""posenet.viz.animate on a sequence rendered by posenet.synth --sequence (3 frames, 2 persons, 2 views).
 
 The tracks are the client's ``--track`` lines built from the sequence's ground truth, with the person ids as
 track ids (no service needed): the GIF must have a frame per line, and each track's colour where its skeleton
@@ -14,10 +14,10 @@ import pytest
 from matplotlib.colors import to_rgb
 from PIL import Image, ImageSequence
 
-from posenet.animate import Floor, Layout, main, project, track_colour
 from posenet.data.mvor import MvorDataset
-from posenet.data.synth.__main__ import main as synth
 from posenet.skeleton import BONES, JOINTS
+from posenet.synth.__main__ import main as synth
+from posenet.viz.animate import Floor, Layout, main, project, track_colour
 
 FRAMES = 3
 VIEW_WIDTH = 200

@@ -3,9 +3,9 @@ import math
 import numpy as np
 import torch
 
-from posenet import augment as aug
 from posenet.cameras import Camera
-from posenet.inputs import InputConfig, build_scene
+from posenet.net import augment as aug
+from posenet.net.inputs import InputConfig, build_scene
 from posenet.skeleton import FLIP_PERMUTATION, JOINTS
 
 

@@ -1,4 +1,4 @@
-"""posenet.calibration: the confidence is a probability, falls with the spread, and the fit recovers a known law."""
+"""posenet.net.calibration: the confidence is a probability, falls with the spread, and the fit recovers a known law."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from posenet.calibrate import write_section
-from posenet.calibration import TYPE_NAMES, TYPE_OF_JOINT, Calibration, fit, reliability
+from posenet.evaluation.calibrate import write_section
+from posenet.net.calibration import TYPE_NAMES, TYPE_OF_JOINT, Calibration, fit, reliability
 from posenet.skeleton import NUM_JOINTS
 
 FITTED = Calibration(

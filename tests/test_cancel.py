@@ -8,8 +8,8 @@ import time
 import pytest
 import torch
 
-from posenet.execution import Precision
-from posenet.runtime import OnnxRunner, export_onnx, installed
+from posenet.runtime.execution import Precision
+from posenet.runtime.graphs import OnnxRunner, export_onnx, installed
 from service.cancel import Cancelled, CancelToken
 
 

@@ -1,13 +1,20 @@
-"""posenet.checkpoint_files: the checkpoint layout both stages share, and what /model reads from it."""
+"""posenet.net.checkpoint_files: the checkpoint layout both stages share, and what /model reads from it."""
 
 import json
 
 import pytest
 import torch
 
-from posenet.checkpoint import load_checkpoint, save_checkpoint, sectioned, training_config
-from posenet.checkpoint_files import OLD_STATE, STATE, files, read_config, train_state_file, write_checkpoint
-from posenet.model import ModelConfig, PoseNet
+from posenet.net.checkpoint import load_checkpoint, save_checkpoint, sectioned, training_config
+from posenet.net.checkpoint_files import (
+    OLD_STATE,
+    STATE,
+    files,
+    read_config,
+    train_state_file,
+    write_checkpoint,
+)
+from posenet.net.model import ModelConfig, PoseNet
 from service.model_info import summarise_training
 
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import torch
 
+from pipeline.two_stage import PersonResult, SceneResult
 from posenet.data.images import subsample_color, subsample_depth
-from posenet.inputs import reduction
+from posenet.net.inputs import reduction
 from service.decode import decode_color, decode_depth
-from service.pipeline import PersonResult, SceneResult
 from service.response import _restore_sent_boxes
 from service.validation import Limits, parse_scene, validate_scene
 
@@ -77,7 +77,7 @@ def test_cameras_and_boxes_follow_and_answers_keep_the_pixels_as_sent():
 def test_served_frame_meets_the_network_as_offline(color_format):
     """Reference boxes: the reduced decode gives the offline (full-resolution) joints; exactly for PNG colour,
     where it runs the reader's own subsampling, and within 5 mm for JPEG's DCT-scaled decode."""
-    from service.pipeline import ScenePipeline
+    from pipeline.two_stage import ScenePipeline
 
     pipe = ScenePipeline.from_checkpoints(precision="fp32", backend="torch", load_detector=False)
     text = (FRAME / "scene_boxes.json").read_text()

@@ -1,4 +1,4 @@
-"""detector.group: detections grouped across views into persons, the boxes of `posenet.adapt --boxes detector`."""
+"""pipeline.group: detections grouped across views into persons, the boxes of `posenet.training.adapt --boxes detector`."""
 
 import dataclasses
 import json
@@ -6,12 +6,12 @@ import json
 import torch
 from tiny_scenes import write_dataset
 
-from detector.group import main as group_main
-from posenet.adapt import main as adapt_main
-from posenet.augment import AugmentConfig
-from posenet.checkpoint import save_checkpoint
-from posenet.inputs import InputConfig
-from posenet.model import ModelConfig, PoseNet
+from pipeline.group import main as group_main
+from posenet.net.augment import AugmentConfig
+from posenet.net.checkpoint import save_checkpoint
+from posenet.net.inputs import InputConfig
+from posenet.net.model import ModelConfig, PoseNet
+from posenet.training.adapt import main as adapt_main
 
 
 def test_grouped_detections_feed_adaptation(tmp_path):

@@ -12,13 +12,13 @@ import pytest
 import torch
 from conftest import write_tiny_mvor
 
+from pipeline.two_stage import ScenePipeline
 from posenet.data.mvor import MvorDataset
 from posenet.data.support import pose_support
-from posenet.evaluate import prediction_record
-from posenet.infer import PoseEstimator
-from posenet.model import ModelConfig, PoseNet
+from posenet.evaluation.evaluate import prediction_record
+from posenet.net.infer import PoseEstimator
+from posenet.net.model import ModelConfig, PoseNet
 from posenet.scene import views_of
-from service.pipeline import ScenePipeline
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
 from detector_mode import single_view_errors, worst_poses  # noqa: E402

@@ -61,6 +61,11 @@ def test_every_copied_path_is_in_the_build_context():
     # what the package needs at run time is package data, so `pip install .` in the image carries it
     for weights in ("posenet/weights/default.safetensors", "detector/weights"):
         assert (REPO_ROOT / weights).exists() and not ignored(weights, patterns)
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11+
+
+    project = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text())
+    packages = {p.rstrip("*") for p in project["tool"]["setuptools"]["packages"]["find"]["include"]}
+    assert packages <= set(sources), f"the image copies {sources}, the package is made of {sorted(packages)}"
     assert ignored("tests/test_docker.py", patterns) and ignored(".venv/bin/python", patterns)
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from conftest import REPO_ROOT, write_tiny_mvor
 
-from posenet.evaluate import evaluate, evaluate_folds, format_tables, main
+from posenet.evaluation.evaluate import evaluate, evaluate_folds, format_tables, main
 from posenet.skeleton import JOINT_TYPES, SUPPORT_TYPES
 
 
@@ -194,7 +194,7 @@ def test_cli_round_trip(gt: dict, tmp_path, capsys) -> None:
     day2.write_text(json.dumps(preds[4:]))
     folds_out = tmp_path / "folds.json"
     files = ["--predictions", str(day1), "--predictions", str(day2)]
-    cmd = [sys.executable, "-m", "posenet.evaluate", "--annotations", str(gt_path), *files, "--folds"]
+    cmd = [sys.executable, "-m", "posenet.evaluation.evaluate", "--annotations", str(gt_path), *files, "--folds"]
     cmd += ["--json", str(folds_out)]
     proc = subprocess.run(cmd, cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr

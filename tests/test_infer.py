@@ -7,11 +7,11 @@ import torch
 from tiny_scenes import write_dataset
 
 from posenet.cameras import Camera
-from posenet.checkpoint import DEFAULT_WEIGHTS, load_checkpoint, save_checkpoint
 from posenet.data.mvor import MvorDataset
-from posenet.infer import PoseEstimator
-from posenet.inputs import InputConfig, build_scene, resize_view
-from posenet.model import ModelConfig, PoseNet
+from posenet.net.checkpoint import DEFAULT_WEIGHTS, load_checkpoint, save_checkpoint
+from posenet.net.infer import PoseEstimator
+from posenet.net.inputs import InputConfig, build_scene, resize_view
+from posenet.net.model import ModelConfig, PoseNet
 from posenet.scene import Scene, views_of
 
 
@@ -104,10 +104,10 @@ def test_checkpoint_round_trip(scene, tmp_path):
 
 def test_missing_default_weights_say_how_to_get_them(tmp_path, monkeypatch):
     # A checkout or install without the shipped weights (they ship in this repo, so point the default elsewhere).
-    import posenet.checkpoint
+    import posenet.net.checkpoint
 
-    monkeypatch.setattr(posenet.checkpoint, "DEFAULT_WEIGHTS", tmp_path / "default.safetensors")
-    with pytest.raises(FileNotFoundError, match="posenet.train"):
+    monkeypatch.setattr(posenet.net.checkpoint, "DEFAULT_WEIGHTS", tmp_path / "default.safetensors")
+    with pytest.raises(FileNotFoundError, match="posenet.training.train"):
         PoseEstimator.from_checkpoint(None)
     with pytest.raises(FileNotFoundError, match="does not exist"):
         PoseEstimator.from_checkpoint("/nonexistent/model.safetensors")

@@ -17,7 +17,7 @@ import httpx
 import pytest
 from service_harness import REPO_ROOT, Server
 
-from posenet.runtime import installed
+from posenet.runtime.graphs import installed
 
 FRAME = REPO_ROOT / "examples" / "frame"
 
@@ -28,7 +28,7 @@ def wheel(tmp_path_factory) -> Path:
     src = tmp_path_factory.mktemp("src")
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(REPO_ROOT / name, src / name)
-    for package in ("posenet", "detector", "service"):
+    for package in ("posenet", "detector", "pipeline", "service"):
         shutil.copytree(REPO_ROOT / package, src / package, ignore=shutil.ignore_patterns("__pycache__"))
     out = tmp_path_factory.mktemp("dist")
     cmd = [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(out), str(src)]
@@ -65,7 +65,7 @@ def test_the_installed_wheel_starts_int8_without_shared_and_answers_the_example_
         "ORPOSE_THREADS": "2",
     }
     where = subprocess.run(
-        [sys.executable, "-c", "import posenet, service; print(posenet.__file__); print(service.__file__)"],
+        [sys.executable, "-c", "import pipeline, posenet, service; print(pipeline.__file__); print(posenet.__file__); print(service.__file__)"],
         env={**os.environ, **env}, cwd=run_dir, capture_output=True, text=True, check=True,
     ).stdout.split()  # fmt: skip
     assert all(Path(p).is_relative_to(site) for p in where), where

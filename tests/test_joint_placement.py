@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from posenet.data.synth.poses import PoseParams, build_pose
 from posenet.skeleton import NUM_JOINTS
+from posenet.synth.poses import PoseParams, build_pose
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
 from joint_placement import SIDE, TYPE_OF, corrected, errors, fit_offsets, frames  # noqa: E402

@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from posenet.cameras import Camera
-from posenet.lifting import EPS_LOGIT, aggregate, centre_of_mass_2d, fuse_2d, lift, masked_logits
+from posenet.net.lifting import EPS_LOGIT, aggregate, centre_of_mass_2d, fuse_2d, lift, masked_logits
 
 
 def _cameras(V: int, dtype=torch.float64) -> Camera:

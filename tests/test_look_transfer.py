@@ -1,4 +1,4 @@
-"""benchmarks/look_transfer.py end to end on two tiny datasets standing in for two looks: one posenet.train run per
+"""benchmarks/look_transfer.py end to end on two tiny datasets standing in for two looks: one posenet.training.train run per
 modality on the first, its held-out day validated (in-look) and the second's same day watched (cross-look)."""
 
 from __future__ import annotations

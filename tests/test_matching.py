@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from detector.matching import (
+from pipeline.matching import (
     box_centres_3d,
     box_depths,
     choose_greedily,
@@ -232,7 +232,7 @@ def test_optimal_partition_keeps_a_whole_person_against_two_closer_pairs():
 
 
 def test_optimal_partition_is_a_partition_and_never_worse_than_greedy(monkeypatch):
-    import detector.matching
+    import pipeline.matching
 
     rng = np.random.default_rng(1)
     for _ in range(30):
@@ -249,12 +249,12 @@ def test_optimal_partition_is_a_partition_and_never_worse_than_greedy(monkeypatc
             greedy = choose_greedily(combos, len(view))
             assert _partition_cost(best, reward) <= _partition_cost(greedy, reward) + 1e-6
             # the subset search and the integer program find partitions of the same cost
-            monkeypatch.setattr(detector.matching, "_SEARCH_ITEMS", 0)
+            monkeypatch.setattr(pipeline.matching, "_SEARCH_ITEMS", 0)
             by_milp = choose_optimally(combos, len(view), reward)
             monkeypatch.undo()
             assert abs(_partition_cost(by_milp, reward) - _partition_cost(best, reward)) < 1e-6
             # a search stopped by its state budget hands the component to the integer program
-            monkeypatch.setattr(detector.matching, "_SEARCH_STATES", 1)
+            monkeypatch.setattr(pipeline.matching, "_SEARCH_STATES", 1)
             capped = choose_optimally(combos, len(view), reward)
             monkeypatch.undo()
             assert abs(_partition_cost(capped, reward) - _partition_cost(best, reward)) < 1e-6
@@ -271,7 +271,7 @@ def test_bad_input_raises():
 
 
 def test_association_counts_found_split_merged():
-    from detector.association import frame_association
+    from pipeline.association import frame_association
 
     cams = ring_cameras(3)
     people = np.array([[-600.0, 0.0, 3000.0], [700.0, 0.0, 3300.0]])
@@ -283,7 +283,7 @@ def test_association_counts_found_split_merged():
     assert (out["found"], out["complete"], out["split"], out["merged"], out["missed"]) == (2, 2, 0, 0, 0)
     assert out["iou_sum"] == pytest.approx(2.0)  # every person: IoU 1 in all 3 views
 
-    from detector.matching import Group
+    from pipeline.matching import Group
 
     c = np.zeros(3)
     # Person 0 split over two groups; person 1 found.
@@ -319,7 +319,7 @@ def test_association_counts_found_split_merged():
 def test_dense_components_equal_scipy():
     from scipy.sparse.csgraph import connected_components
 
-    from detector.matching import components
+    from pipeline.matching import components
 
     rng = np.random.default_rng(0)
     for n in (0, 1, 2, 7, 30, 300):  # 300: beyond a frame, the sparse search itself

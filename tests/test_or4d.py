@@ -168,7 +168,7 @@ def test_errors_name_the_file(tiny):
 
 
 def test_export_to_mvor_layout_reads_back_and_evaluates(tiny, tmp_path):
-    from posenet.evaluate import evaluate
+    from posenet.evaluation.evaluate import evaluate
 
     ds = Or4dDataset(tiny[0], modalities=())
     gt = ds.to_mvor(tmp_path / "mvor")

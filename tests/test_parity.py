@@ -1,4 +1,4 @@
-"""Parity of the two ways to run the pose network on a dataset frame: offline (``python -m posenet.predict``) and
+"""Parity of the two ways to run the pose network on a dataset frame: offline (``python -m posenet.evaluation.predict``) and
 served (a real ``uvicorn service.app:app`` over HTTP, reference boxes). The same frames, sent at their full
 resolution, must give the same joints to 0.1 mm. Both run the U-Net on torch (``ORPOSE_BACKEND=torch``) in
 float32, so the only way they can differ is in what they feed the network: above all the resolution the views
@@ -17,11 +17,11 @@ import torch
 from conftest import write_tiny_mvor
 from service_harness import Server, form_kwargs
 
-from posenet import predict
-from posenet.checkpoint import DEFAULT_WEIGHTS, save_checkpoint
 from posenet.data.mvor import MvorDataset
-from posenet.inputs import InputConfig, record_read_size, reduction
-from posenet.model import ModelConfig, PoseNet
+from posenet.evaluation import predict
+from posenet.net.checkpoint import DEFAULT_WEIGHTS, save_checkpoint
+from posenet.net.inputs import InputConfig, record_read_size, reduction
+from posenet.net.model import ModelConfig, PoseNet
 from service.client import scene_request
 
 TOLERANCE_MM = 0.1

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 import torch
 
-import posenet.execution as execution
-from posenet.execution import machine, machine_line, resolve_precision
-from posenet.runtime import BACKENDS, export_onnx, installed, resolve_backend
+import posenet.runtime.execution as execution
+from posenet.runtime.execution import machine, machine_line, resolve_precision
+from posenet.runtime.graphs import BACKENDS, export_onnx, installed, resolve_backend
 
 REPO = Path(__file__).resolve().parents[1]
 FRAME = REPO / "examples" / "frame"
@@ -95,7 +95,7 @@ def cache(tmp_path_factory):
 @pytest.mark.skipif(not RUNTIMES, reason="neither onnxruntime nor openvino is installed")
 @pytest.mark.parametrize("backend", RUNTIMES)
 def test_runtime_matches_torch_on_the_example_frame(backend, example_frame, cache):
-    from service.pipeline import ScenePipeline
+    from pipeline.two_stage import ScenePipeline
 
     detect, boxed = example_frame
     ref = ScenePipeline.from_checkpoints(precision="fp32", backend="torch")
@@ -131,13 +131,13 @@ def test_runtime_matches_torch_on_the_example_frame(backend, example_frame, cach
 
 
 def test_a_failing_runtime_falls_back_to_torch(monkeypatch, tmp_path):
-    import posenet.runtime
-    from posenet.infer import PoseEstimator
+    import posenet.runtime.graphs
+    from posenet.net.infer import PoseEstimator
 
     def broken(*args, **kwargs):
         raise RuntimeError("no such runtime here")
 
-    monkeypatch.setattr(posenet.runtime, "OnnxRunner", broken)
+    monkeypatch.setattr(posenet.runtime.graphs, "OnnxRunner", broken)
     monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
     est = PoseEstimator.from_checkpoint(None, precision="fp32", backend=RUNTIMES[0] if RUNTIMES else "torch")
     assert est.backend.name == "torch"
@@ -180,8 +180,8 @@ def test_a_cancelled_openvino_call_leaves_the_runner_usable(tmp_path, monkeypatc
     import threading
     import time
 
-    from posenet.infer import PoseEstimator
-    from posenet.runtime import stop_call
+    from posenet.net.infer import PoseEstimator
+    from posenet.runtime.graphs import stop_call
 
     monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
     est = PoseEstimator.from_checkpoint(None, precision="fp32", backend="openvino", threads=2)
@@ -221,8 +221,8 @@ def test_int8_graphs_are_calibrated_once_and_stay_near_float32(example_frame, tm
     a second load finds the cached int8 graphs and renders nothing; torch and ONNX Runtime, asked for int8, say
     that they compute float32. (2 scenes keep the test fast; a weak box's score can move by 0.2 with so few, which
     the default 12 do not: benchmarks/backend_accuracy.py measures the shipped calibration.)"""
-    import posenet.quantize as quantize
-    from service.pipeline import ScenePipeline
+    import posenet.runtime.quantize as quantize
+    from pipeline.two_stage import ScenePipeline
 
     monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
     monkeypatch.setenv("ORPOSE_INT8_SCENES", "2")

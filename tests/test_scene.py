@@ -6,9 +6,9 @@ import torch
 from tiny_scenes import write_dataset
 
 from posenet.data.mvor import MvorDataset
-from posenet.infer import PoseEstimator
-from posenet.inputs import InputConfig
-from posenet.model import ModelConfig, PoseNet
+from posenet.net.infer import PoseEstimator
+from posenet.net.inputs import InputConfig
+from posenet.net.model import ModelConfig, PoseNet
 from posenet.scene import Scene, SceneView, views_of
 
 

@@ -23,10 +23,10 @@ import torch
 from conftest import write_tiny_mvor
 from service_harness import REPO_ROOT, Server, form_kwargs, raw_request, tiny_checkpoints
 
-from posenet.calibrate import write_section
-from posenet.calibration import Calibration
-from posenet.checkpoint import checkpoint_files
 from posenet.data.mvor import MvorDataset
+from posenet.evaluation.calibrate import write_section
+from posenet.net.calibration import Calibration
+from posenet.net.checkpoint import checkpoint_files
 from posenet.skeleton import JOINTS
 from service.client import scene_request
 

@@ -7,10 +7,10 @@ import pytest
 from conftest import write_tiny_mvor
 from service_harness import tiny_checkpoints
 
-from detector.skeleton_matching import SkeletonMatchConfig
+from pipeline.skeleton_matching import SkeletonMatchConfig
+from pipeline.two_stage import PipelineConfig, ScenePipeline
 from posenet.data.mvor import MvorDataset
 from posenet.scene import views_of
-from service.pipeline import PipelineConfig, ScenePipeline
 
 CROP = 96 * 96  # the cpu preset's network input
 

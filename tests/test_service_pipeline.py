@@ -11,14 +11,14 @@ from conftest import write_tiny_mvor
 from service_harness import tiny_checkpoints
 
 from detector.infer import PersonDetector
-from detector.matching import box_centres_3d, valid_combinations
+from pipeline.matching import box_centres_3d, valid_combinations
+from pipeline.two_stage import PipelineConfig, ScenePipeline, group_by_ids
 from posenet.cameras import Camera
 from posenet.data.mvor import MvorDataset
-from posenet.evaluate import evaluate
-from posenet.infer import PoseEstimator
-from posenet.model import ModelConfig, PoseNet
+from posenet.evaluation.evaluate import evaluate
+from posenet.net.infer import PoseEstimator
+from posenet.net.model import ModelConfig, PoseNet
 from posenet.scene import SceneView, views_of
-from service.pipeline import PipelineConfig, ScenePipeline, group_by_ids
 
 
 @pytest.fixture(scope="module")
@@ -146,9 +146,9 @@ def test_settings_reach_the_pipeline(monkeypatch):
 
 
 def test_settings_reach_every_stream_s_tracker(monkeypatch):
-    """ORPOSE_TRACK_* knobs become the streams' tracker config: defaults as posenet.track's, 0 turns the unsure
+    """ORPOSE_TRACK_* knobs become the streams' tracker config: defaults as pipeline.track's, 0 turns the unsure
     gate off, and a coast outside (0, 60] s is refused."""
-    from posenet.track import TrackerConfig
+    from pipeline.track import TrackerConfig
     from service.app import tracker_config
     from service.settings import Settings
 

@@ -189,7 +189,7 @@ def test_colour_optional_only_for_depth_models_with_boxes():
 def test_a_non_finite_estimate_is_never_sent_as_null():
     # The inputs are bounded so that this should not happen; if the models still give NaN, the client gets a
     # 422 that says what to check rather than a 200 whose numbers are null.
-    from service.pipeline import PersonResult, SceneResult
+    from pipeline.two_stage import PersonResult, SceneResult
     from service.response import encode
 
     scene = validate([{"camera": camera(), "boxes": [[1, 2, 30, 40]], "person_ids": [7]}], parts(1))

@@ -14,7 +14,7 @@ import pytest
 from service_harness import REPO_ROOT, Server
 
 from detector.infer import DEFAULT_WEIGHTS as DETECTOR_WEIGHTS
-from posenet.checkpoint import DEFAULT_WEIGHTS as POSE_WEIGHTS
+from posenet.net.checkpoint import DEFAULT_WEIGHTS as POSE_WEIGHTS
 
 FRAME = REPO_ROOT / "examples" / "frame"
 # A held-out (day-4) MVOR-twin frame; the shipped weights are about 4 cm off on it and 6.8 cm on all of day 4.

@@ -9,15 +9,15 @@ import pytest
 import torch
 from conftest import write_tiny_mvor
 
-from detector.association import evaluate_association
-from detector.matching import match_boxes
-from detector.skeleton_matching import SkeletonMatchConfig, group_skeletons, members_of, skeleton_distances
+from pipeline.association import evaluate_association
+from pipeline.matching import match_boxes
+from pipeline.skeleton_matching import SkeletonMatchConfig, group_skeletons, members_of, skeleton_distances
+from pipeline.two_stage import PipelineConfig, ScenePipeline
 from posenet.data.mvor import MvorDataset
-from posenet.infer import PoseEstimator
-from posenet.inputs import InputConfig
-from posenet.model import ModelConfig, PoseNet
+from posenet.net.infer import PoseEstimator
+from posenet.net.inputs import InputConfig
+from posenet.net.model import ModelConfig, PoseNet
 from posenet.scene import Scene, views_of
-from service.pipeline import PipelineConfig, ScenePipeline
 
 TEMPLATE = np.array(
     [[0, -700, 0], [0, -550, 0], [180, -500, 0], [-180, -500, 0], [120, 0, 0], [-120, 0, 0],
@@ -138,7 +138,7 @@ def test_grouping_recovers_persons_split_duplicated_and_single_view(seed):
     assert found == [["A", "A", "A", "A"], ["B", "B", "B"], ["C"], ["D", "D"], ["E", "E"]]
     assert [len(set(view[m])) for m, _ in groups] == [3, 2, 2, 2, 1]  # multi-view first
     # The paper's centre matcher on the same boxes splits D, whose centre fell on the wall in view 1.
-    from detector.matching import choose_greedily, valid_combinations
+    from pipeline.matching import choose_greedily, valid_combinations
 
     by_centre = choose_greedily(valid_combinations(centres, view, 750.0), len(view))
     assert any(sorted(who[i] for i in m) == ["D"] for m, _ in by_centre)
@@ -223,7 +223,7 @@ def test_pipeline_with_the_skeleton_matcher(tiny):
 
 
 def test_members_of_lists_every_box_of_a_group():
-    from detector.matching import Group
+    from pipeline.matching import Group
 
     boxes = [np.zeros((2, 4)), np.zeros((1, 4)), np.zeros((3, 4))]
     groups = [Group((1, -1, 0), np.zeros(3), 0.0, ((2, 2),)), Group((-1, 0, -1), np.zeros(3), 0.0)]
@@ -278,7 +278,7 @@ def test_a_member_bonus_lets_a_close_pair_win_over_a_loose_triple():
     """Items 0 (view 0), 1 (view 1), 2 (view 2): 0-1 are 100 apart, 2 is 500 from both. The paper's order takes
     the triple; a bonus of 200 per extra member ranks the pair (100 - 200) before the triple (367 - 400),
     and a bonus of 300 keeps the triple first (367 - 600 < 100 - 300). None is the paper's rule."""
-    from detector.matching import choose_greedily, combinations_within
+    from pipeline.matching import choose_greedily, combinations_within
 
     dist = np.array([[0, 100, 500], [100, 0, 500], [500, 500, 0]], float)
     view = np.array([0, 1, 2])
@@ -302,7 +302,7 @@ class MeanFusion:
         self.joints = torch.as_tensor(joints, dtype=torch.float32)
 
     def estimate(self, members):
-        from posenet.lifting import JointEstimate
+        from posenet.net.lifting import JointEstimate
 
         members = torch.as_tensor(np.asarray(members))
         used = (members >= 0).float()[..., None, None]  # (P, S, 1, 1)
@@ -310,7 +310,7 @@ class MeanFusion:
         return JointEstimate(joints, torch.zeros(joints.shape[:2]), (members >= 0).any(1))
 
     def single_view(self):
-        from posenet.lifting import JointEstimate
+        from posenet.net.lifting import JointEstimate
 
         return JointEstimate(
             self.joints, torch.zeros(self.joints.shape[:2]), torch.ones(len(self.joints), dtype=torch.bool)
@@ -318,13 +318,13 @@ class MeanFusion:
 
 
 def _groups(*rows):
-    from detector.matching import Group
+    from pipeline.matching import Group
 
     return [Group(tuple(r), np.zeros(3), 0.0) for r in rows]
 
 
 def test_unsure_boxes_complete_persons_but_never_start_one():
-    from detector.skeleton_matching import admit_candidates
+    from pipeline.skeleton_matching import admit_candidates
 
     rng = np.random.default_rng(0)
     A, B = TEMPLATE + [0, 0, 3000], TEMPLATE + [900, 0, 3200]
@@ -345,7 +345,7 @@ def test_unsure_boxes_complete_persons_but_never_start_one():
 
 
 def test_a_box_far_from_the_rest_of_its_person_is_dropped():
-    from detector.skeleton_matching import drop_outliers
+    from pipeline.skeleton_matching import drop_outliers
 
     A = TEMPLATE + [0, 0, 3000]
     # a person of 4 boxes: views 0, 1, 2 and a second box in view 1 (a duplicate); view 2's box reads someone
@@ -354,7 +354,7 @@ def test_a_box_far_from_the_rest_of_its_person_is_dropped():
     joints = np.stack([A, A, A + [10, 0, 0], A + [0, 5, 0], A + [0, 0, 800], A + [0, 0, 900]])
     ok = np.ones((6, 10), bool)
     boxes = [np.zeros((2, 4)), np.zeros((2, 4)), np.zeros((2, 4))]
-    from detector.matching import Group
+    from pipeline.matching import Group
 
     groups = [Group((0, 0, 0), np.zeros(3), 0.0, ((1, 1),)), Group((1, -1, 1), np.zeros(3), 0.0)]
     out = drop_outliers(MeanFusion(joints), groups, boxes, joints, ok, within_mm=300.0)
@@ -408,7 +408,7 @@ def test_detector_mode_uses_unsure_boxes_only_to_complete_persons(tmp_path, tiny
     # asked through a tracker's questions (TrackerQuestions, as a stream asks Tracker.unsure_targets): they see the
     # frame's persons as they are answered, and the answer (a track within reach of all, or none) decides whether
     # the unsure ones are found at all
-    from service.pipeline import TrackerQuestions
+    from pipeline.two_stage import TrackerQuestions
 
     seen = []
 
@@ -472,8 +472,8 @@ def test_a_person_one_view_saw_where_another_sees_free_space_is_dropped():
     """Step 7: view 0 has a box of a skeleton 3 m ahead; view 1 (identical camera) looks at it too. Behind the
     skeleton only background (free space) and no box there: nobody. An occluder in front of it, or a box of view
     1 over it, or the skeleton outside view 1's image: the person stays."""
-    from detector.matching import Group
-    from detector.skeleton_matching import drop_unseen, seen_from
+    from pipeline.matching import Group
+    from pipeline.skeleton_matching import drop_unseen, seen_from
     from posenet.cameras import Camera
     from posenet.scene import SceneView
 
@@ -513,8 +513,8 @@ def test_unsure_boxes_left_over_are_grouped_for_a_tracker():
     """Step 8: the unsure boxes no person took are grouped among themselves (a person unsure in both views is
     one), one that another view should have seen in free space is dropped, and sure or admitted boxes are never
     reused."""
-    from detector.matching import Group
-    from detector.skeleton_matching import group_unsure
+    from pipeline.matching import Group
+    from pipeline.skeleton_matching import group_unsure
     from posenet.cameras import Camera
     from posenet.scene import SceneView
 

@@ -3,7 +3,7 @@
 One server serves the module, with a token, at most 2 streams, streams that expire after 3 s idle, and the
 tracker's spread limit raised to 5 m: random weights spread every joint over ~1 m (their joints still follow
 each person's boxes, 2 m apart in the sequence, so the tracker can follow them). Frames are a 6-frame sequence
-rendered by ``posenet.data.synth --sequence`` (2 persons, 2 views, 10 fps), sent in reference-box mode with the
+rendered by ``posenet.synth --sequence`` (2 persons, 2 views, 10 fps), sent in reference-box mode with the
 annotated ids, exactly as the batch client sends them.
 """
 
@@ -21,9 +21,9 @@ import pytest
 from service_harness import REPO_ROOT, Server, form_kwargs, reference_box_env
 
 from posenet.data.mvor import MvorDataset, load_annotations
-from posenet.data.synth.__main__ import main as synth
 from posenet.rig.check import floor_of_frame
 from posenet.skeleton import JOINTS
+from posenet.synth.__main__ import main as synth
 from service.client import scene_request, stream_prefix
 
 TOKEN = "s3cret"
@@ -138,8 +138,8 @@ def test_a_stream_looks_for_the_floor_once_per_rig_and_again_later_when_none_was
 
     import torch
 
+    from pipeline.track import Tracker
     from posenet.scene import SceneView
-    from posenet.track import Tracker
     from service.streams import FLOOR_RETRY_FRAMES, Stream, find_up
     from service.validation import ValidatedScene
 

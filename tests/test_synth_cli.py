@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from posenet.data.synth.__main__ import main
+from posenet.synth.__main__ import main
 
 
 @pytest.mark.parametrize(

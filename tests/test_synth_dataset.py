@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from posenet.data.mvor import MvorDataset
-from posenet.data.synth.__main__ import main
+from posenet.synth.__main__ import main
 
 MVOR_JSON = Path(__file__).resolve().parents[1] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
 REAL_KEYS = {

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posenet.data.synth.primitives import (
+from posenet.synth.primitives import (
     BOX,
     CAPSULE,
     CONE,
@@ -18,7 +18,7 @@ from posenet.data.synth.primitives import (
     round_cone,
     shell,
 )
-from posenet.data.synth.raster import Intrinsics, rasterize, screen_rect
+from posenet.synth.raster import Intrinsics, rasterize, screen_rect
 
 
 def _rotation(rng: np.random.Generator) -> np.ndarray:
@@ -145,8 +145,8 @@ def test_box_geometry_matches_the_project_camera_model():
 
     from posenet.boxes import box_iou
     from posenet.cameras import Camera
-    from posenet.data.synth.boxes import covered, project_boxes
-    from posenet.data.synth.rig import random_rig
+    from posenet.synth.boxes import covered, project_boxes
+    from posenet.synth.rig import random_rig
 
     rng = np.random.default_rng(1)
     rig = random_rig(rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), 3)

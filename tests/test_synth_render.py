@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posenet.data.synth.poses import POSTURES, build_pose, sample_params
-from posenet.data.synth.procedural import procedural_frame
-from posenet.data.synth.rig import random_rig
-from posenet.data.synth.scene import render_frame
-from posenet.data.synth.skeleton_full import LENGTHS, F, complete_legs, estimate_floor
+from posenet.synth.poses import POSTURES, build_pose, sample_params
+from posenet.synth.procedural import procedural_frame
+from posenet.synth.rig import random_rig
+from posenet.synth.scene import render_frame
+from posenet.synth.skeleton_full import LENGTHS, F, complete_legs, estimate_floor
 
 
 @pytest.fixture(scope="module")

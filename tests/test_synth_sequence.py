@@ -7,11 +7,11 @@ import json
 import numpy as np
 
 from posenet.data.mvor import MvorDataset
-from posenet.data.synth.__main__ import main
-from posenet.data.synth.rig import random_rig
-from posenet.data.synth.sequence import build_stage
-from posenet.data.synth.skeleton_full import NUM_MVOR_POINTS
 from posenet.skeleton import BONES, JOINT_INDEX
+from posenet.synth.__main__ import main
+from posenet.synth.rig import random_rig
+from posenet.synth.sequence import build_stage
+from posenet.synth.skeleton_full import NUM_MVOR_POINTS
 
 TRUNK_SIDES = {(JOINT_INDEX[f"{s}_shoulder"], JOINT_INDEX[f"{s}_hip"]) for s in ("left", "right")}
 

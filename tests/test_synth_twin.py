@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from posenet.data.synth.boxes import project_boxes
-from posenet.data.synth.bystanders import floor_position, merge_positions
-from posenet.data.synth.poses import build_pose, place, sample_params
-from posenet.data.synth.procedural import procedural_frame
-from posenet.data.synth.rig import random_rig
-from posenet.data.synth.scene import Person, render_frame
-from posenet.data.synth.twin import _cuboid_corners, add_occluders, assign_boxes, fit_table
+from posenet.synth.boxes import project_boxes
+from posenet.synth.bystanders import floor_position, merge_positions
+from posenet.synth.poses import build_pose, place, sample_params
+from posenet.synth.procedural import procedural_frame
+from posenet.synth.rig import random_rig
+from posenet.synth.scene import Person, render_frame
+from posenet.synth.twin import _cuboid_corners, add_occluders, assign_boxes, fit_table
 
 
 @pytest.fixture(scope="module")

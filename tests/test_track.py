@@ -1,13 +1,11 @@
-"""posenet.track: ids stay with their persons, come back after a gap, joints get smoother, bones steadier."""
+"""pipeline.track: ids stay with their persons, come back after a gap, joints get smoother, bones steadier."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from posenet.data.synth.poses import PoseParams, build_pose
-from posenet.skeleton import BONE_TEMPLATE_MM, JOINT_INDEX, NUM_JOINTS
-from posenet.track import (
+from pipeline.track import (
     Tracker,
     TrackerConfig,
     _middle,
@@ -21,7 +19,9 @@ from posenet.track import (
     skeleton_height,
     torso_length,
 )
-from posenet.track_eval import SequenceFrame, TrackedPerson, evaluate, run_tracker, score
+from pipeline.track_eval import SequenceFrame, TrackedPerson, evaluate, run_tracker, score
+from posenet.skeleton import BONE_TEMPLATE_MM, JOINT_INDEX, NUM_JOINTS
+from posenet.synth.poses import PoseParams, build_pose
 
 FPS = 15.0
 # The pipeline's spread overstates its error: on rendered sequences a median spread of ~300 mm came with a mean
@@ -148,7 +148,7 @@ def test_unsure_targets_say_when_unsure_persons_can_change_nothing():
             and len(boxed.unsure_targets(obs[~mask], spread[~mask], f / FPS, within=within)) > 0
         )
         asked_boxed.append(need_boxed)
-        # only the unsure persons within reach of those targets (posenet.track.reaching, as a stream finds them)
+        # only the unsure persons within reach of those targets (pipeline.track.reaching, as a stream finds them)
         keep = ~mask
         targets = reach.unsure_targets(obs[~mask], spread[~mask], f / FPS)
         if mask.any() and len(targets):

@@ -8,16 +8,16 @@ import pytest
 import torch
 from tiny_scenes import write_dataset
 
-from posenet.augment import AugmentConfig
 from posenet.data.mvor import MvorDataset
-from posenet.inputs import InputConfig, build_scene
-from posenet.loss import mpjpe
-from posenet.model import ModelConfig, PoseNet
-from posenet.predict import main as predict_main
+from posenet.evaluation.predict import main as predict_main
+from posenet.net.augment import AugmentConfig
+from posenet.net.inputs import InputConfig, build_scene
+from posenet.net.loss import mpjpe
+from posenet.net.model import ModelConfig, PoseNet
 from posenet.scene import Scene
-from posenet.train import lr_factor, single_view_loss
-from posenet.train import main as train_main
-from posenet.visualize import main as visualize_main
+from posenet.training.train import lr_factor, single_view_loss
+from posenet.training.train import main as train_main
+from posenet.viz.visualize import main as visualize_main
 
 REPO = Path(__file__).resolve().parents[1]
 TINY = ["--subsample", "1", "--crop-size", "32", "--base", "8", "--threads", "1"]
@@ -164,7 +164,7 @@ def test_cli_time_budget_stops_and_resumes(tiny, tmp_path):
 def test_torchrun_ddp_gloo_two_processes(tiny, tmp_path):
     root, _ = tiny
     run = tmp_path / "ddp"
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "-m", "posenet.train",
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "-m", "posenet.training.train",
            "--data", str(root), "--holdout-day", "2", "--out", str(run), *TINY,
            "--epochs", "1", "--device", "cpu"]  # fmt: skip
     _run(cmd)
@@ -178,7 +178,7 @@ def test_torchrun_ddp_gloo_two_processes(tiny, tmp_path):
 def test_cli_init_starts_from_given_weights(tiny, tmp_path):
     from safetensors.torch import load_file
 
-    from posenet.train import load_init_weights
+    from posenet.training.train import load_init_weights
 
     root, _ = tiny
     first, second = tmp_path / "first", tmp_path / "second"

@@ -1,8 +1,8 @@
 import pytest
 import torch
 
-from posenet.inputs import InputConfig
-from posenet.unet import UNet, UNetConfig
+from posenet.net.inputs import InputConfig
+from posenet.net.unet import UNet, UNetConfig
 
 
 @pytest.mark.parametrize("modality,channels", [("rgbd", 5), ("depth", 2), ("rgb", 4)])
@@ -53,7 +53,7 @@ def test_flops_scale_with_area_and_keep_bn_state():
 
 
 def test_widening_computes_the_same_and_then_learns():
-    from posenet.unet import widen_state_dict
+    from posenet.net.unet import widen_state_dict
 
     torch.manual_seed(0)
     small_cfg, wide_cfg = (

@@ -1,1 +1,1 @@
-"""Training presets of the pose network, one json per preset (read by ``posenet.train``)."""
+"""Training presets of the pose network, one json per preset (read by ``posenet.training.train``)."""

@@ -1,6 +1,6 @@
 """The MVOR-format reader: a dataset root plus its annotation json -> multi-view :class:`Sample`\\ s.
 
-MVOR's schema (``camma_mvor_2018.json``; the renderer in ``posenet/data/synth`` writes the same, plus extra
+MVOR's schema (``camma_mvor_2018.json``; the renderer in ``posenet/synth`` writes the same, plus extra
 keys that are ignored here):
 - ``multiview_images[*]``: one synchronised frame, ``id`` (e.g. ``"10010000000_10020000000_10030000000"``) and
   its ``images`` (``file_name``, ``id``, ``cam_id`` 1-based, ``day_id``, ``width``, ``height``).
@@ -74,7 +74,7 @@ def load_annotations(path: str | Path, poses: bool = True) -> dict:
     """Read and check an MVOR-format annotation json (ValueError naming the file and the missing keys).
 
     ``poses=False`` drops ``annotations3D`` as soon as the file is parsed, and does not require it: for
-    unlabelled recordings, and for the users that must never see 3D poses (``posenet.adapt``)."""
+    unlabelled recordings, and for the users that must never see 3D poses (``posenet.training.adapt``)."""
     gt = read_annotation_json(path)
     if not poses and isinstance(gt, dict):
         gt.pop("annotations3D", None)
@@ -208,7 +208,7 @@ class MvorDataset(torch.utils.data.Dataset):
         modalities: which images to load, a subset of ``("color", "depth")``; ``()`` reads annotations only.
         days: the recording days to keep (None keeps all).
         poses: False never reads ``annotations3D`` (a loaded dict must not hold them; a path is loaded without
-            them): every sample then has no 3D pose. For recordings without 3D poses, and for ``posenet.adapt``,
+            them): every sample then has no 3D pose. For recordings without 3D poses, and for ``posenet.training.adapt``,
             which must never see them.
     """
 

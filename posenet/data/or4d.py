@@ -27,7 +27,7 @@ Conversions (as 4D-OR's own loaders, ``helpers/utils.py`` and the VoxelPose data
 Training, prediction and evaluation read MVOR's layout; ``python -m posenet.data.or4d ROOT --export-mvor OUT``
 writes ``OUT/annotations.json`` in MVOR's schema and links every image into ``OUT/take<T>/cam<c>/{color,depth}/``
 (OpenCV decodes by content, so a ``.png`` link to a ``.jpg`` or ``.tiff`` reads as it is), after which
-``posenet.train --data OUT``, ``posenet.predict`` and ``posenet.evaluate`` run unchanged.
+``posenet.training.train --data OUT``, ``posenet.evaluation.predict`` and ``posenet.evaluation.evaluate`` run unchanged.
 """
 
 from __future__ import annotations

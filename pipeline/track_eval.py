@@ -1,0 +1,236 @@
+"""How well a tracker follows people over a sequence: identities, smoothness, plausible bones, cost.
+
+:func:`evaluate` runs a :class:`pipeline.track.Tracker` over a sequence's frames (the pose pipeline's persons
+and the ground truth) and :func:`score` measures its tracks, or tracks made elsewhere (a served stream's):
+
+- **Identities** with ``motmetrics`` (CLEAR MOT and IDF1): a confirmed track and a ground-truth person can match
+  when their mean joint distance is at most ``gate_mm`` (3D, mm). MOTA, IDF1, id switches, and switches per 1,000
+  ground-truth person-frames. Persons in view that the ground truth does not annotate (a frame's
+  ``ignore_joints``: a rendered sequence's ``unannotated3D``, people MVOR's convention leaves box-only) count
+  neither way, as MOTChallenge treats its distractors: a track that the optimal assignment under the gate gives
+  to one of them rather than to an annotated person is left out of that frame.
+- **Per-frame against smoothed MPJPE** (cm), on the same matched pairs: the pipeline's joints as they came, and
+  the tracker's.
+- **Acceleration error** (mm/frame^2): the mean over joints of ``|a_pred - a_gt|``, with ``a = x[t+1] - 2 x[t] +
+  x[t-1]``, wherever a person is matched in three consecutive frames (the usual jitter figure of video pose
+  estimation); per-frame against smoothed.
+- **Bone lengths**: per track, the standard deviation over time of each bone's length (mm); the mean over
+  tracks of each bone's, and the largest of those. Beside it the same for the per-frame joints (per ground-truth
+  person) and for the ground truth itself (a twisting trunk changes the shoulder-to-hip sides by ~1 cm).
+- **Cost**: the tracker's milliseconds per frame (mean and 95th percentile).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from pipeline.track import Tracker, bone_lengths, mean_joint_distance
+from posenet.skeleton import BONES, NUM_JOINTS
+
+MM_PER_CM = 10.0
+# Issue 15's goals: (figure, comparison, bound).
+GOALS = {
+    "idf1": (">=", 0.95),
+    "switches_per_1000": ("<=", 1.0),
+    "mpjpe_ratio": ("<=", 0.9),
+    "accel_ratio": ("<=", 0.5),
+    "bone_std_max_mm": ("<=", 10.0),
+    "track_ms_mean": ("<=", 2.0),
+}
+
+
+# A track within this mean joint distance of a ground-truth person can be that person (the 3D gate of MOTA/IDF1).
+GATE_MM = 500.0
+
+
+@dataclass
+class SequenceFrame:
+    """One frame of a sequence: its time, the ground truth and the pipeline's persons.
+
+    gt_ids: (G,) person ids; gt_joints: (G, J, 3) mm; joints: (P, J, 3) mm; spread: (P, J) mm; unsure: (P,)
+    bool, persons that may only continue a track (``pipeline.track.Tracker.update``), or None; up: (3,) the
+    room's up direction in the joints' frame, or None; ignore_joints: (I, J, 3) mm, persons in view whom the
+    ground truth does not annotate (the module docstring), or None.
+    """
+
+    timestamp_s: float
+    gt_ids: np.ndarray
+    gt_joints: np.ndarray
+    joints: np.ndarray
+    spread: np.ndarray
+    unsure: np.ndarray | None = None
+    up: np.ndarray | None = None
+    ignore_joints: np.ndarray | None = None
+
+
+def gated_pairs(people: np.ndarray, tracks: dict, gate_mm: float = GATE_MM) -> list[tuple[int, int]]:
+    """``(person index, track id)`` pairs of the optimal assignment on the mean joint distance between ``people
+    (G, J, 3)`` and the smoothed joints of ``tracks`` (``{track_id: person}``), pairs beyond ``gate_mm`` left out:
+    the evaluation's gate."""
+    people = np.asarray(people, float).reshape(-1, NUM_JOINTS, 3)
+    if not tracks or not len(people):
+        return []
+    ids = list(tracks)
+    dist = mean_joint_distance(people, np.array([tracks[t].joints for t in ids]))  # (G, T)
+    rows, cols = linear_sum_assignment(np.where(dist <= gate_mm, dist, 1e9))
+    return [(int(g), ids[t]) for g, t in zip(rows, cols, strict=True) if dist[g, t] <= gate_mm]
+
+
+def _ignored(frame: SequenceFrame, tracks: dict, gate_mm: float) -> set:
+    """The track ids of a frame's ``tracks`` (``{track_id: person}``) that :func:`gated_pairs` gives to a person of
+    ``frame.ignore_joints`` rather than to an annotated one."""
+    ignore = frame.ignore_joints
+    if ignore is None or not len(ignore):
+        return set()
+    people = np.concatenate([frame.gt_joints.reshape(-1, NUM_JOINTS, 3), ignore.reshape(-1, NUM_JOINTS, 3)])
+    return {t for g, t in gated_pairs(people, tracks, gate_mm) if g >= len(frame.gt_ids)}
+
+
+def _bone_std(lengths: dict) -> tuple[list[float], float]:
+    """Per bone, the mean over tracks of the std over time (mm), and its largest, from ``{track: [(B,), ...]}``."""
+    per_track = [np.std(np.array(v), axis=0) for v in lengths.values() if len(v) >= 2]
+    if not per_track:
+        return [float("nan")] * len(BONES), float("nan")
+    mean = np.mean(per_track, axis=0)
+    return [round(float(x), 2) for x in mean], round(float(mean.max()), 2)
+
+
+def _accel_error(series: dict) -> float:
+    """Mean acceleration error (mm/frame^2) over ``{gt id: {frame: (pred (J, 3), gt (J, 3))}}``."""
+    errors = []
+    for frames in series.values():
+        for f in frames:
+            if f - 1 in frames and f + 1 in frames:
+                pred = frames[f + 1][0] - 2 * frames[f][0] + frames[f - 1][0]
+                gt = frames[f + 1][1] - 2 * frames[f][1] + frames[f - 1][1]
+                errors.append(np.linalg.norm(pred - gt, axis=-1).mean())
+    return round(float(np.mean(errors)), 2) if errors else float("nan")
+
+
+@dataclass
+class TrackedPerson:
+    """A confirmed track's person in one frame: raw (J, 3) and smoothed (J, 3) joints, mm (as
+    ``pipeline.track.Tracker.update`` gives them, or as the service's stream answered them)."""
+
+    track_id: int
+    raw: np.ndarray
+    joints: np.ndarray
+
+
+def run_tracker(frames: list[SequenceFrame], tracker: Tracker) -> tuple[list[dict], list[float]]:
+    """Track the frames' persons: per frame ``{track_id: person}`` of the confirmed tracks, and the tracker's
+    milliseconds per frame."""
+    ms, hyps = [], []
+    for fr in frames:
+        t0 = time.perf_counter()
+        out = tracker.update(fr.joints, fr.spread, fr.timestamp_s, fr.unsure, fr.up)
+        ms.append((time.perf_counter() - t0) * 1e3)
+        hyps.append({p.track_id: p for p in out if p.track_id is not None})
+    return hyps, ms
+
+
+def evaluate(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GATE_MM) -> dict:
+    """Track one sequence's ``frames`` (in time order) with ``tracker`` and measure it (module docstring)."""
+    hyps, ms = run_tracker(frames, tracker)
+    return score(frames, hyps, ms, gate_mm)
+
+
+def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_mm: float = GATE_MM) -> dict:
+    """Measure tracks against the ground truth (module docstring).
+
+    Args:
+        frames: the sequence in time order (only the ground truth and the time are read).
+        hyps: per frame, ``{track_id: person}`` of the confirmed tracks; a person has ``raw`` and ``joints``
+            (smoothed), (J, 3) mm: :func:`run_tracker`'s, or :class:`TrackedPerson` s of a served stream.
+        ms: the tracker's milliseconds per frame.
+    """
+    try:
+        import motmetrics as mm  # imported here: pandas takes a while, and only the evaluation needs it
+    except ImportError as exc:
+        raise ImportError(
+            "the tracking evaluation needs motmetrics: pip install 'or-pose[eval]' (or pip install motmetrics)"
+        ) from exc
+
+    if len(hyps) != len(frames):
+        raise ValueError(f"{len(hyps)} frames of tracks for {len(frames)} frames of ground truth")
+    acc = mm.MOTAccumulator(auto_id=True)
+    ignored = 0
+    for fr, hyp in zip(frames, hyps, strict=True):
+        left_out = _ignored(fr, hyp, gate_mm)
+        ignored += len(left_out)
+        hyp = {t: p for t, p in hyp.items() if t not in left_out}
+        confirmed = list(hyp.values())
+        smoothed = np.array([p.joints for p in confirmed]).reshape(len(confirmed), NUM_JOINTS, 3)
+        dist = mean_joint_distance(fr.gt_joints.reshape(-1, NUM_JOINTS, 3), smoothed)  # (G, H)
+        acc.update(fr.gt_ids.tolist(), list(hyp), np.where(dist <= gate_mm, dist, np.nan))
+    mh = mm.metrics.create()
+    summary = mh.compute(acc, metrics=["mota", "idf1", "num_switches", "num_objects", "num_false_positives",
+                                       "num_misses", "num_frames"], name="s")  # fmt: skip
+    row = summary.loc["s"]
+    # The matched pairs (frame, gt id, track id), as motmetrics matched them.
+    events = acc.mot_events
+    pairs = events[events["Type"].isin(["MATCH", "SWITCH"])]
+    raw_err, smooth_err = [], []
+    raw_series, smooth_series = defaultdict(dict), defaultdict(dict)
+    raw_bones, smooth_bones, gt_bones = defaultdict(list), defaultdict(list), defaultdict(list)
+    for (f, _), ev in pairs.iterrows():
+        fr, gid, tid = frames[f], int(ev["OId"]), int(ev["HId"])
+        gt = fr.gt_joints[list(fr.gt_ids).index(gid)]
+        person = hyps[f][tid]
+        raw_err.append(np.linalg.norm(person.raw - gt, axis=-1).mean())
+        smooth_err.append(np.linalg.norm(person.joints - gt, axis=-1).mean())
+        raw_series[gid][f] = (person.raw, gt)
+        smooth_series[gid][f] = (person.joints, gt)
+        raw_bones[gid].append(bone_lengths(person.raw))
+        smooth_bones[tid].append(bone_lengths(person.joints))
+        gt_bones[gid].append(bone_lengths(gt))
+    objects = int(row["num_objects"])
+    mpjpe_raw = float(np.mean(raw_err)) / MM_PER_CM if raw_err else float("nan")
+    mpjpe_smooth = float(np.mean(smooth_err)) / MM_PER_CM if smooth_err else float("nan")
+    accel_raw, accel_smooth = _accel_error(raw_series), _accel_error(smooth_series)
+    bones_smooth, bones_smooth_max = _bone_std(smooth_bones)
+    bones_raw, bones_raw_max = _bone_std(raw_bones)
+    bones_gt, bones_gt_max = _bone_std(gt_bones)
+    return {
+        "frames": len(frames),
+        "gt_person_frames": objects,
+        "tracks": len({t for h in hyps for t in h}),
+        "gt_persons": len({int(i) for fr in frames for i in fr.gt_ids}),
+        "mota": round(float(row["mota"]), 4),
+        "idf1": round(float(row["idf1"]), 4),
+        "id_switches": int(row["num_switches"]),
+        "switches_per_1000": round(1000 * int(row["num_switches"]) / max(objects, 1), 2),
+        "false_positives": int(row["num_false_positives"]),
+        "ignored_track_frames": ignored,  # tracks on persons in view that the ground truth does not annotate
+        "misses": int(row["num_misses"]),
+        "mpjpe_per_frame_cm": round(mpjpe_raw, 2),
+        "mpjpe_smoothed_cm": round(mpjpe_smooth, 2),
+        "mpjpe_ratio": round(mpjpe_smooth / mpjpe_raw, 3),
+        "accel_per_frame_mm": accel_raw,
+        "accel_smoothed_mm": accel_smooth,
+        "accel_ratio": round(accel_smooth / accel_raw, 3),
+        "bone_std_mm": bones_smooth,
+        "bone_std_max_mm": bones_smooth_max,
+        "bone_std_per_frame_max_mm": bones_raw_max,
+        "bone_std_per_frame_mm": bones_raw,
+        "bone_std_ground_truth_max_mm": bones_gt_max,
+        "bone_std_ground_truth_mm": bones_gt,
+        "track_ms_mean": round(float(np.mean(ms)), 3),
+        "track_ms_p95": round(float(np.percentile(ms, 95)), 3),
+        "gate_mm": gate_mm,
+    }
+
+
+def goal_lines(figures: dict) -> list[str]:
+    """One line per goal of :data:`GOALS`: the figure, the bound and whether it is met."""
+    lines = []
+    for key, (op, bound) in GOALS.items():
+        value = figures[key]
+        met = value >= bound if op == ">=" else value <= bound
+        lines.append(f"{key:>20} {value:>8} (goal {op} {bound}) {'met' if met else 'NOT met'}")
+    return lines

@@ -1,9 +1,0 @@
-"""Synthetic operating-room RGB-D scenes in MVOR's layout and schema (see ``docs/synth.md``).
-
-``python -m posenet.data.synth --out DIR --scenes N --rig random`` renders procedural scenes;
-``python -m posenet.data.synth --out DIR --from-mvor camma_mvor_2018.json`` renders the MVOR twin.
-"""
-
-from posenet.data.synth.writer import SynthConfig, generate
-
-__all__ = ["SynthConfig", "generate"]

@@ -1,0 +1,282 @@
+"""Inference runtimes: a torch module exported once to ONNX, then run by ONNX Runtime or OpenVINO.
+
+Both networks of the service (the pose network's U-Net, the detector) are plain convolution/attention graphs
+that an inference runtime runs faster on a CPU than eager torch does (fused batch norm, tuned kernels, no
+Python between layers): ``benchmarks/service_latency.py`` and ``benchmarks/RESULTS.md`` compare them. torch
+stays the fallback, and the only choice for training and for GPUs.
+
+Backends (``ORPOSE_BACKEND`` for the service, ``--backend`` on the command lines):
+
+- ``torch``: eager torch, channels_last, bf16 autocast where :mod:`posenet.runtime.execution` chooses bf16;
+- ``onnxruntime``: ONNX Runtime's CPU provider, float32;
+- ``openvino``: OpenVINO's CPU plugin, float32, or bf16 where the CPU computes bf16 natively, or int8 when asked
+  for (``posenet.runtime.quantize``: quantized graphs, cached beside the float32 ones);
+- ``auto`` (default): ``openvino`` if it is installed, else ``onnxruntime``, else ``torch``; torch on a GPU.
+
+The ONNX files are **built at first use** from the weights being loaded and cached under
+``$ORPOSE_CACHE_DIR`` (default ``~/.cache/or-pose``), named by a hash of the weights, the config and the
+exporter, so a changed checkpoint can never meet a stale graph. They are not shipped: the float32 graph of the
+detector alone is 60 MB, more than the repository's budget for weights, and an export takes a few seconds.
+``python -m service.export`` builds them ahead of time (the Docker image does, so containers start warm).
+If an export or a runtime fails, the model runs on torch and the reason is logged and reported by ``/model``.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import importlib.util
+import json
+import logging
+import os
+import threading
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from posenet.runtime.execution import Precision, cache_dir
+
+BACKENDS = ("auto", "torch", "onnxruntime", "openvino")
+# Bumped whenever the export itself changes, so that cached graphs of an older exporter are rebuilt.
+EXPORT_VERSION = 1
+OPSET = 17
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Backend:
+    """A resolved backend: ``name`` (``torch``, ``onnxruntime`` or ``openvino``) and why it was chosen."""
+
+    name: str
+    reason: str
+
+
+def installed(backend: str) -> bool:
+    module = {"onnxruntime": "onnxruntime", "openvino": "openvino", "torch": "torch"}[backend]
+    return importlib.util.find_spec(module) is not None
+
+
+def resolve_backend(requested: str | None = "auto", device: str | torch.device = "cpu") -> Backend:
+    """The backend to run on: ``requested`` (one of ``BACKENDS``; None = ``auto``) on ``device``."""
+    requested = requested or "auto"
+    if requested not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {requested!r}")
+    device = torch.device(device)
+    if requested == "torch":
+        return Backend("torch", "torch was asked for")
+    if device.type != "cpu":
+        return Backend("torch", f"the ONNX runtimes here run on the CPU, and the device is {device}")
+    if requested != "auto":
+        if not installed(requested):
+            raise ValueError(f"backend {requested!r} is not installed: pip install {requested}")
+        return Backend(requested, f"{requested} was asked for")
+    for name in ("openvino", "onnxruntime"):
+        if installed(name):
+            return Backend(name, f"auto: {name} is installed (fastest measured here, benchmarks/RESULTS.md)")
+    return Backend("torch", "auto: neither openvino nor onnxruntime is installed")
+
+
+def load_runner(
+    backend: str | None,
+    device: str | torch.device,
+    export: Callable[[], Path],
+    threads: int | None,
+    precision: Precision,
+    calibrate: Callable[[OnnxRunner], list[dict]] | None = None,
+    transformer: bool = False,
+) -> tuple[OnnxRunner | None, Backend]:
+    """The runner of ``backend`` for the graph that ``export()`` builds, or None for torch; and the backend that
+    runs. Any failure of an export or a runtime falls back to torch, with the reason, so a model always runs.
+
+    At ``int8`` precision on OpenVINO the graph is quantized (``posenet.runtime.quantize``): ``calibrate(runner)`` runs
+    a float32 ``runner`` on the calibration scenes and returns its recorded inputs (called only when the int8
+    graph is not cached yet); ``transformer`` selects NNCF's scheme for attention layers. If quantizing fails,
+    the float32 graph runs, and its precision's reason says why."""
+    chosen = resolve_backend(backend, device)
+    if chosen.name == "torch":
+        return None, chosen
+    threads = threads or torch.get_num_threads()
+    try:
+        graph = export()
+        if precision.int8 and chosen.name == "openvino":
+            try:
+                from posenet.runtime.quantize import quantize_graph
+
+                fp32 = Precision("fp32", "the float32 graph that int8 is calibrated from")
+                float32 = functools.partial(OnnxRunner, graph, "openvino", threads, fp32)
+                return OnnxRunner(quantize_graph(graph, lambda: calibrate(float32()), transformer), "openvino",
+                                  threads, precision), chosen  # fmt: skip
+            except (Exception, SystemExit) as exc:  # whatever calibration raises, float32 still runs
+                log.warning("int8 quantization failed, running float32: %s", exc)
+                precision = Precision("fp32", f"int8 failed ({type(exc).__name__}: {exc}); float32")
+        return OnnxRunner(graph, chosen.name, threads, precision), chosen
+    except (Exception, SystemExit) as exc:  # a broken runtime must leave a working (torch) model
+        return None, Backend("torch", f"{chosen.name} failed ({type(exc).__name__}: {exc}); using torch")
+
+
+def graph_key(module: torch.nn.Module, extra: dict) -> str:
+    """A hash of ``module``'s weights, ``extra`` (its config, input shapes) and the exporter's versions."""
+    h = hashlib.sha256()
+    for name, tensor in module.state_dict().items():
+        h.update(name.encode())
+        h.update(tensor.detach().cpu().contiguous().numpy().tobytes())
+    h.update(json.dumps(extra, sort_keys=True, default=str).encode())
+    h.update(f"{torch.__version__}/{EXPORT_VERSION}/{OPSET}".encode())
+    return h.hexdigest()[:20]
+
+
+def export_onnx(
+    module: torch.nn.Module,
+    example: Sequence[torch.Tensor],
+    input_names: Sequence[str],
+    output_names: Sequence[str],
+    dynamic_axes: dict,
+    name: str,
+    extra: dict,
+    folder: Path | None = None,
+) -> Path:
+    """Export ``module`` (float32, eval) to ``FOLDER/NAME-<key>.onnx`` unless that file exists; its path.
+
+    The graph is traced on ``example``; ``dynamic_axes`` names the axes that may change size (the batch).
+    Written beside and renamed, so a crash mid-export never leaves a half-written graph in the cache.
+    """
+    folder = Path(folder or cache_dir())
+    path = folder / f"{name}-{graph_key(module, extra)}.onnx"
+    if path.is_file():
+        return path
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".{os.getpid()}.{threading.get_ident()}.tmp")
+    # Every submodule's own mode, restored exactly: the exporter restores only the top module's mode, which
+    # for a fresh wrapper (training=True) would switch the wrapped network's batch norms to training.
+    modes = {m: m.training for m in module.modules()}
+    module.eval()
+    try:
+        with torch.no_grad(), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # tracer warnings about Python control flow on shapes
+            torch.onnx.export(
+                module,
+                tuple(example),
+                str(tmp),
+                input_names=list(input_names),
+                output_names=list(output_names),
+                dynamic_axes=dynamic_axes,
+                opset_version=OPSET,
+                dynamo=False,
+            )
+        tmp.replace(path)
+    finally:
+        for m, training in modes.items():
+            m.training = training
+        tmp.unlink(missing_ok=True)
+    log.info("exported %s to %s", name, path)
+    return path
+
+
+# A call that a thread is running, and how to end it early from another thread (it then raises in the caller):
+# the service stops the work of a client that has disconnected (service/cancel.py).
+_stoppers: dict[int, Callable[[], object]] = {}
+
+
+def stop_call(thread: int) -> bool:
+    """End the runtime call that ``thread`` (a ``threading.get_ident()``) is running, if any: it raises there.
+    Returns whether there was one."""
+    stop = _stoppers.get(thread)
+    if stop is not None:
+        stop()
+    return stop is not None
+
+
+class OnnxRunner:
+    """An exported graph called like the module it came from: torch tensors in, a tuple of tensors out.
+
+    Args:
+        path: the ``.onnx`` file, or OpenVINO's ``.xml`` (the int8 graphs of ``posenet.runtime.quantize``).
+        backend: ``onnxruntime`` or ``openvino``.
+        threads: intra-op threads (the service's ``ORPOSE_THREADS``).
+        precision: bf16 is used by OpenVINO only (ONNX Runtime's CPU provider computes float32); int8 means
+            ``path`` is a quantized graph.
+    """
+
+    def __init__(self, path: str | Path, backend: str, threads: int, precision: Precision) -> None:
+        self.path = Path(path)
+        self.backend = backend
+        self.threads = threads
+        self.precision = precision if backend == "openvino" else Precision("fp32", "ONNX Runtime runs fp32")
+        if backend == "onnxruntime":
+            import onnxruntime as ort
+
+            options = ort.SessionOptions()
+            options.intra_op_num_threads = threads
+            options.inter_op_num_threads = 1
+            options.log_severity_level = 3
+            self._session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
+            self.input_names = [i.name for i in self._session.get_inputs()]
+        elif backend == "openvino":
+            self._compile()
+            self.input_names = [p.get_any_name() for p in self._compiled.inputs]
+            self._local = threading.local()  # an infer request per thread: requests are not thread-safe
+        else:
+            raise ValueError(f"OnnxRunner runs onnxruntime or openvino, not {backend!r}")
+
+    def _compile(self) -> None:
+        import openvino as ov
+
+        hint = "bf16" if self.precision.bf16 else "f32"
+        self._compiled = ov.Core().compile_model(
+            str(self.path),
+            "CPU",
+            {"INFERENCE_NUM_THREADS": self.threads, "INFERENCE_PRECISION_HINT": hint, "NUM_STREAMS": 1},
+        )
+
+    def __call__(self, **inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """Run on named inputs; inputs that the graph does not use (pruned by the export) are ignored."""
+        arrays = {
+            k: np.ascontiguousarray(v.detach().cpu().numpy())
+            for k, v in inputs.items()
+            if k in self.input_names
+        }
+        missing = set(self.input_names) - set(arrays)
+        if missing:
+            raise ValueError(f"the graph {self.path.name} needs inputs {sorted(missing)}")
+        thread = threading.get_ident()
+        if self.backend == "onnxruntime":
+            import onnxruntime as ort
+
+            options = ort.RunOptions()
+            _stoppers[thread] = lambda: setattr(options, "terminate", True)
+            try:
+                outs = self._session.run(None, arrays, options)
+            finally:
+                _stoppers.pop(thread, None)
+        else:
+            compiled = self._compiled
+            request = getattr(self._local, "request", None)
+            if request is None or getattr(self._local, "compiled", None) is not compiled:
+                request = self._local.request = compiled.create_infer_request()
+                self._local.compiled = compiled
+            # Asynchronous start and wait rather than infer(): only an asynchronous request can be cancelled.
+            _stoppers[thread] = request.cancel
+            try:
+                request.start_async(arrays)
+                request.wait()
+            except BaseException:
+                # Cancelled, or interrupted (service.cancel raises in this thread). A cancelled run leaves the
+                # compiled model's shapes half-updated: the next run with another batch size then fails shape
+                # inference inside OpenVINO 2026.4 ("Concat ... {96,...},{5,...}"). So wait for this run to end
+                # and compile the graph afresh (a fraction of a second, paid once after a disconnect).
+                try:
+                    request.cancel()
+                    request.wait()
+                except Exception:
+                    pass
+                self._local.request = None
+                self._compile()
+                raise
+            finally:
+                _stoppers.pop(thread, None)
+            outs = [request.results[o] for o in compiled.outputs]
+        return tuple(torch.from_numpy(np.array(o, dtype=np.float32, copy=True)) for o in outs)
