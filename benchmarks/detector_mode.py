@@ -231,7 +231,7 @@ def main(argv: list[str] | None = None) -> dict:
         args.pose_checkpoint, args.detector_checkpoint, backend="auto", threads=args.threads,
         flip_test=args.flip_test,
     )  # fmt: skip
-    # The views as the service decodes them (at the networks' read size, tests/test_parity.py): the detector then
+    # The views as the service decodes them (at the networks' read size, tests/pipeline/test_parity.py): the detector then
     # sees the pixels it sees when served, and the figures are the served ones.
     ds = read_dataset(args.data, gt, pipe.read_size, days)
     best = (-1, None)  # (unsure boxes taken, frame index) for --picture; a named frame: (None, its index)

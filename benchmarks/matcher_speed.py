@@ -3,7 +3,7 @@
     nice python benchmarks/matcher_speed.py [--views 3 4] [--people 1 2 4 6 8 10] [--min-seen 0.5]
 
 Scenes: P people on a grid 0.9 m apart, seen by V ceiling-mounted cameras on a ring (the hand-made scenes of
-``tests/test_matching.py``, raised 1.5 m). A box is drawn where at least half of it shows its person
+``tests/pipeline/test_matching.py``, raised 1.5 m). A box is drawn where at least half of it shows its person
 (``--min-seen 0``: all P x V boxes, the most combinations). Prints one JSON line per (V, P): the median
 microseconds of ``match_boxes`` (robust depth, lifting, enumeration, greedy choice), and how many persons
 came out as exactly one group holding all their boxes.

@@ -53,7 +53,7 @@ def detect(
     from service.validation import ValidatedScene
 
     pipe = ScenePipeline.from_checkpoints(detector_checkpoint=detector, backend=backend, threads=threads)
-    # The views as the service decodes them (tests/test_parity.py): the persons equal the served ones.
+    # The views as the service decodes them (tests/pipeline/test_parity.py): the persons equal the served ones.
     ds = read_dataset(data, gt, pipe.read_size)
     # Without a room frame in the file, the room's up comes from the floor, looked for as a stream does it (once
     # per sequence and rig, again later when none was seen; service.streams.find_up).

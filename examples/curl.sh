@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Post the example frame (3 views of 640x480: colour JPEG + 16-bit depth PNG in mm) to a running service.
 #   examples/curl.sh                      # detector mode, http://localhost:8000
-#   examples/curl.sh scene_boxes.json     # reference-box mode (the annotated box of person 0 in each view)
+#   examples/curl.sh scene_boxes.json     # reference-box mode: the annotated boxes of the 2 persons with a 3D pose
+# truth.json holds those 2 persons' joints. Each view also shows 2 persons MVOR boxes without a pose (too few
+# joints visible), and detector mode answers them too, so it returns more persons than truth.json lists.
 #   URL=http://host:8000 ORPOSE_TOKEN=secret examples/curl.sh
 set -euo pipefail
 cd "$(dirname "$0")/frame"

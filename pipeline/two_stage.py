@@ -163,7 +163,7 @@ def fused(heat, matched: list, unsure: list, boxes: list[np.ndarray], sure=None)
     more = heat.estimate(members_of(unsure, boxes))
     return JointEstimate(
         torch.cat([sure.joints, more.joints]),
-        torch.cat([sure.confidence, more.confidence]),
+        torch.cat([sure.spread_mm, more.spread_mm]),
         torch.cat([sure.has_points, more.has_points]),
     )
 

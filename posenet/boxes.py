@@ -33,6 +33,8 @@ import numpy as np
 import torch
 from scipy.optimize import linear_sum_assignment
 
+from posenet.cameras import rescale_pixels
+
 NO_IDENTITY = -1  # the person id of a box that belongs to nobody known
 
 ArrayLike = np.ndarray | torch.Tensor
@@ -89,7 +91,7 @@ def cxcywh_norm_to_xyxy(boxes: ArrayLike, width: int, height: int) -> ArrayLike:
 def scale_xyxy(boxes: ArrayLike, factor: float) -> ArrayLike:
     """Boxes ``(..., 4)`` of an image resized by ``factor`` (0.5 halves it)."""
     _check("boxes", boxes)
-    return (boxes + 0.5) * factor - 0.5
+    return rescale_pixels(boxes, factor)
 
 
 def flip_xyxy(boxes: ArrayLike, width: int) -> ArrayLike:

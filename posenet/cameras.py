@@ -70,6 +70,13 @@ def transform_points(T: Tensor, points: Tensor) -> Tensor:
     return (R @ points.unsqueeze(-1)).squeeze(-1) + t
 
 
+def rescale_pixels(u, factor):
+    """Pixel coordinates ``u`` (any float array, tensor or number) in an image resized by ``factor``:
+    ``(u + 0.5) * factor - 0.5``, so that pixel centres stay pixel centres (the convention above). The one place
+    this rule is written: cameras, boxes and crops all rescale through it."""
+    return (u + 0.5) * factor - 0.5
+
+
 @dataclass(frozen=True)
 class Camera:
     """A pinhole camera (see the module docstring for every convention).
@@ -297,7 +304,7 @@ class Camera:
         f = float(factor)
         K = self.intrinsics.clone()
         K[..., :2] = K[..., :2] * f
-        K[..., 2:] = (K[..., 2:] + 0.5) * f - 0.5
+        K[..., 2:] = rescale_pixels(K[..., 2:], f)
         size = None if self.size is None else (round(self.size[0] * f), round(self.size[1] * f))
         return Camera(K, self.extrinsics, self.distortion, size)
 

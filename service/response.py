@@ -18,6 +18,7 @@ import numpy as np
 
 from pipeline.two_stage import PersonResult, SceneResult
 from posenet.boxes import hull
+from posenet.cameras import rescale_pixels
 from posenet.skeleton import JOINTS
 from service.errors import InputError
 from service.schemas import Joint, Person, SceneOut, Support, Timings
@@ -32,7 +33,7 @@ def _restore_sent_boxes(persons: list[PersonResult], scene: ValidatedScene) -> N
             for v, box in enumerate(person.boxes):
                 k = scene.reduced[v] if scene.reduced else 1
                 if box is not None and k != 1:
-                    person.boxes[v] = (np.asarray(box, np.float64) + 0.5) * k - 0.5
+                    person.boxes[v] = rescale_pixels(np.asarray(box, np.float64), k)
         return
     for person in persons:  # reference boxes: the person's boxes as sent (their hull where it holds several)
         for v, held in enumerate(person.box_indices):

@@ -131,7 +131,7 @@ class BoxHeatmaps:
                 persons, and a person may hold several boxes of one view.
 
         Returns:
-            joints (P, J, 3) mm reference frame, confidence (P, J) mm, has_points (P,).
+            joints (P, J, 3) mm reference frame, spread_mm (P, J) mm, has_points (P,).
         """
         members = torch.as_tensor(np.asarray(members, np.int64) if not torch.is_tensor(members) else members)
         if members.ndim != 2:
@@ -154,9 +154,9 @@ class BoxHeatmaps:
         P, J = members.shape[0], self.passes[0].logits.shape[1]
         out = JointEstimate(torch.zeros(P, J, 3), torch.zeros(P, J), torch.zeros(P, dtype=torch.bool))
         for rows, est in parts:
-            out.joints[rows], out.confidence[rows], out.has_points[rows] = (
+            out.joints[rows], out.spread_mm[rows], out.has_points[rows] = (
                 est.joints.cpu().float(),
-                est.confidence.cpu().float(),
+                est.spread_mm.cpu().float(),
                 est.has_points.cpu(),
             )
         return out
@@ -177,9 +177,9 @@ class BoxHeatmaps:
                 valid = take(p.valid) & used.unsqueeze(-1)  # (P, S, M)
                 outs.append(self.estimate_fn(take(p.logits), take(p.uv), take(p.depth), valid, cams))
         joints = torch.stack([o.joints for o in outs]).mean(0)
-        confidence = torch.stack([o.confidence for o in outs]).mean(0)
+        spread = torch.stack([o.spread_mm for o in outs]).mean(0)
         has_points = torch.stack([o.has_points for o in outs]).all(0)
-        return JointEstimate(joints, confidence, has_points)
+        return JointEstimate(joints, spread, has_points)
 
     def _fuse(self, members: np.ndarray) -> JointEstimate:
         """``lifting.aggregate`` over each person's boxes ``members (P, S)`` (-1: no box), from the boxes' moments:
@@ -225,7 +225,7 @@ class BoxHeatmaps:
         return means.min((0, 1)), means.max((0, 1))
 
     def single_view(self) -> JointEstimate:
-        """Each box lifted alone: joints (N, J, 3), confidence (N, J), has_points (N,); computed once (the
+        """Each box lifted alone: joints (N, J, 3), spread_mm (N, J), has_points (N,); computed once (the
         matcher reads it again for the boxes it left over), so treat it as read-only."""
         if self._single is None:
             self._single = self.estimate(torch.arange(self.num_boxes)[:, None])

@@ -171,7 +171,7 @@ class PoseEstimator:
     def _prediction(self, scene: Scene, out, inputs: SceneInput | None) -> PosePrediction:
         """The prediction of ``scene`` from its network output ``out``; with its network ``inputs``, the
         heatmaps at the lifted points too."""
-        spread = out.confidence.cpu()  # (P, J) mm: the lifting's spread
+        spread = out.spread_mm.cpu()  # (P, J) mm: the lifting's spread
         pred = PosePrediction(
             out.joints.cpu(),
             spread,

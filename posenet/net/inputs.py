@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 import torch
 
-from posenet.cameras import Camera
+from posenet.cameras import Camera, rescale_pixels
 from posenet.net import augment as aug
 from posenet.scene import SceneView
 
@@ -173,8 +173,8 @@ def resize_view(
             color = cv2.resize(color, new, interpolation=cv2.INTER_AREA)
         depth = cv2.resize(depth, new, interpolation=cv2.INTER_NEAREST)
     K = camera.intrinsics.clone()
-    K[..., 0], K[..., 2] = K[..., 0] * sx, (K[..., 2] + 0.5) * sx - 0.5
-    K[..., 1], K[..., 3] = K[..., 1] * sy, (K[..., 3] + 0.5) * sy - 0.5
+    K[..., 0], K[..., 2] = K[..., 0] * sx, rescale_pixels(K[..., 2], sx)
+    K[..., 1], K[..., 3] = K[..., 1] * sy, rescale_pixels(K[..., 3], sy)
     return color, depth, Camera(K, camera.extrinsics, camera.distortion, new), (sx, sy)
 
 
@@ -262,7 +262,7 @@ def build_scene(
         factors = torch.tensor([r[3] for r in resized], dtype=torch.float32).repeat(
             1, 2
         )  # (V, 4): sx, sy, sx, sy
-        boxes = (boxes + 0.5) * factors.view(1, V, 4) - 0.5  # pixel-centre convention, as Camera.scale
+        boxes = rescale_pixels(boxes, factors.view(1, V, 4))
         views = [r[:3] for r in resized]
     color, depth, cameras = _stack_views(views)
     H, W = depth.shape[-2:]

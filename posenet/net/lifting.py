@@ -38,18 +38,14 @@ class JointEstimate:
 
     Attributes:
         joints: (P, J, 3) mm, reference frame.
-        confidence: (P, J) mm, the weighted spread of each joint's point cloud (smaller = more certain).
+        spread_mm: (P, J) mm, the weighted spread of each joint's point cloud (smaller = more certain; the
+            calibration turns it into a confidence, ``posenet.net.calibration``).
         has_points: (P,) bool, whether the person had any valid point at all (else ``joints`` is meaningless).
     """
 
     joints: Tensor
-    confidence: Tensor
+    spread_mm: Tensor
     has_points: Tensor
-
-    @property
-    def spread_mm(self) -> Tensor:
-        """``confidence`` under the name the API gives it (a spread in mm, not a probability)."""
-        return self.confidence
 
 
 def lift(cameras: Camera, uv: Tensor, depth: Tensor) -> Tensor:
@@ -94,7 +90,7 @@ def aggregate(logits: Tensor, points: Tensor, valid: Tensor, eps: float = EPS_LO
         valid: (P, V, M) bool (P may be 1: broadcast).
 
     Returns:
-        :class:`JointEstimate` with joints (P, J, 3) and confidence (P, J).
+        :class:`JointEstimate` with joints (P, J, 3) and spread_mm (P, J).
     """
     if logits.ndim != 4 or points.ndim != 4 or valid.ndim != 3:
         raise ValueError(
@@ -118,8 +114,8 @@ def aggregate(logits: Tensor, points: Tensor, valid: Tensor, eps: float = EPS_LO
     q_hat = weights @ q  # (P, J, 3)
     joints = q_hat + centre.unsqueeze(1)
     second = weights @ (q * q).sum(-1, keepdim=True)  # (P, J, 1): E_a ||q||^2
-    confidence = ((second.squeeze(-1) - (q_hat * q_hat).sum(-1)).clamp_min(0) + 1e-6).sqrt()
-    return JointEstimate(joints, confidence, valid.reshape(P, V * M).any(-1))
+    spread = ((second.squeeze(-1) - (q_hat * q_hat).sum(-1)).clamp_min(0) + 1e-6).sqrt()
+    return JointEstimate(joints, spread, valid.reshape(P, V * M).any(-1))
 
 
 def centre_of_mass_2d(

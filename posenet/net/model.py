@@ -67,11 +67,11 @@ class ModelConfig:
 
 @dataclass
 class PoseOutput:
-    """joints (P, J, 3) mm, confidence (P, J) mm, logits (P, V, J, M) at the scene's points, has_points (P,),
+    """joints (P, J, 3) mm, spread_mm (P, J) mm (the joints' spread), logits (P, V, J, M) at the scene's points, has_points (P,),
     and for the 2D baseline uv_hat (P, V, J, 2) with view_valid (P, V)."""
 
     joints: Tensor
-    confidence: Tensor
+    spread_mm: Tensor
     has_points: Tensor
     logits: Tensor
     uv_hat: Tensor | None = None
@@ -158,10 +158,10 @@ class PoseNet(nn.Module):
         if self.config.aggregation == "2d":
             est = lifting.fuse_2d(logits, uv, depth, valid, cameras, self.config.eps)
             uv_hat, view_valid = lifting.centre_of_mass_2d(logits, uv, valid, self.config.eps)
-            return PoseOutput(est.joints, est.confidence, est.has_points, logits, uv_hat, view_valid)
+            return PoseOutput(est.joints, est.spread_mm, est.has_points, logits, uv_hat, view_valid)
         points = lifting.lift(cameras, uv, depth)  # (P or 1, S, M, 3)
         est = lifting.aggregate(logits, points, valid, self.config.eps)
-        return PoseOutput(est.joints, est.confidence, est.has_points, logits)
+        return PoseOutput(est.joints, est.spread_mm, est.has_points, logits)
 
 
 @functools.cache
@@ -170,12 +170,12 @@ def _resolved(requested: str, device: str) -> Precision:
 
 
 def average_flips(plain: PoseOutput, mirrored: PoseOutput) -> PoseOutput:
-    """Test-time flip averaging: the mean of the joints (and confidences) of a scene and of its mirrored copy.
+    """Test-time flip averaging: the mean of the joints (and spreads) of a scene and of its mirrored copy.
 
     Both are already in original pixels and un-flipped channels, so they estimate the same joints."""
     return PoseOutput(
         (plain.joints + mirrored.joints) / 2,
-        (plain.confidence + mirrored.confidence) / 2,
+        (plain.spread_mm + mirrored.spread_mm) / 2,
         plain.has_points & mirrored.has_points,
         plain.logits,
     )

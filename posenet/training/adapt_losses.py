@@ -58,7 +58,7 @@ def per_view_estimates(
         eps,
     )  # one "view" per (person, view): the softmax stays inside it
     return lifting.JointEstimate(
-        est.joints.view(P, V, J, 3), est.confidence.view(P, V, J), est.has_points.view(P, V)
+        est.joints.view(P, V, J, 3), est.spread_mm.view(P, V, J), est.has_points.view(P, V)
     )
 
 
@@ -113,12 +113,12 @@ class PseudoLabels:
 def pseudo_labels(plain: PoseOutput, mirrored: PoseOutput, max_uncertainty: float) -> PseudoLabels:
     """3D targets from the teacher's two passes (plain and mirrored inputs, both already un-flipped).
 
-    A joint's uncertainty is its point cloud's spread (``posenet.net.lifting``'s confidence), averaged over the two
+    A joint's uncertainty is its point cloud's spread (``posenet.net.lifting``'s ``spread_mm``), averaged over the two
     passes, plus half the distance between the two passes' joints (the flip test's disagreement: a left/right
     confusion shows up there even when each pass is peaked). Joints at or below ``max_uncertainty`` mm are kept.
     """
     both = average_flips(plain, mirrored)
-    uncertainty = both.confidence + 0.5 * (plain.joints - mirrored.joints).norm(dim=-1)  # (P, J)
+    uncertainty = both.spread_mm + 0.5 * (plain.joints - mirrored.joints).norm(dim=-1)  # (P, J)
     keep = (uncertainty <= max_uncertainty) & both.has_points.unsqueeze(-1)
     return PseudoLabels(both.joints.detach(), keep, uncertainty.detach())
 

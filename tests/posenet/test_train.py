@@ -19,7 +19,7 @@ from posenet.training.train import lr_factor, single_view_loss
 from posenet.training.train import main as train_main
 from posenet.viz.visualize import main as visualize_main
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 TINY = ["--subsample", "1", "--crop-size", "32", "--base", "8", "--threads", "1"]
 
 

@@ -37,7 +37,7 @@ def test_reference_boxes_beyond_the_budget_are_refused_with_the_setting(frame):
 def test_detector_mode_keeps_the_persons_that_fit(frame):
     pose, det, views = frame
     # The random tiny networks' one-view "persons" lie in free space for the other views: the matcher's step 7
-    # would drop them (tests/test_skeleton_matching.py). Admission by cost is tested here, so it is off.
+    # would drop them (tests/pipeline/test_skeleton_matching.py). Admission by cost is tested here, so it is off.
     keep_all = SkeletonMatchConfig(free_space_mm=None)
     free = ScenePipeline.from_checkpoints(pose, det, config=PipelineConfig(skeleton_match=keep_all))
     found = len(free.run(views).persons)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from conftest import write_tiny_mvor
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_look_transfer_reports_in_and_cross_look_per_modality(tmp_path):

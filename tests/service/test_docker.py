@@ -1,7 +1,7 @@
 """Static checks of the image: hadolint on the Dockerfile, and its build context holding what its steps need.
 
 Containers cannot run on our CI machines, so the image is checked without building it. That its int8 step needs
-nothing but the installed package is shown by tests/test_install.py, which runs the same export from a wheel.
+nothing but the installed package is shown by tests/service/test_install.py, which runs the same export from a wheel.
 """
 
 from __future__ import annotations
@@ -66,7 +66,7 @@ def test_every_copied_path_is_in_the_build_context():
     project = tomllib.loads((REPO_ROOT / "pyproject.toml").read_text())
     packages = {p.rstrip("*") for p in project["tool"]["setuptools"]["packages"]["find"]["include"]}
     assert packages <= set(sources), f"the image copies {sources}, the package is made of {sorted(packages)}"
-    assert ignored("tests/test_docker.py", patterns) and ignored(".venv/bin/python", patterns)
+    assert ignored("tests/service/test_docker.py", patterns) and ignored(".venv/bin/python", patterns)
 
 
 def test_the_image_builds_its_int8_graphs_from_the_package_alone():

@@ -437,7 +437,7 @@ def test_the_smoothing_bound_reads_a_known_offset_and_averages_noise(monkeypatch
     import sys
     from pathlib import Path
 
-    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[2] / "benchmarks"))
     sys.modules.pop("smoothing_bound", None)
     from smoothing_bound import ratios
 
@@ -458,7 +458,7 @@ def test_births_list_each_track_s_first_frames(monkeypatch):
     import sys
     from pathlib import Path
 
-    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[2] / "benchmarks"))
     sys.modules.pop("tracking", None)
     from tracking import births
 
@@ -499,7 +499,7 @@ def test_tracking_set_overrides_parse_flags_numbers_and_none(monkeypatch):
     import sys
     from pathlib import Path
 
-    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[2] / "benchmarks"))
     sys.modules.pop("tracking", None)
     from tracking import tracker_config
 

@@ -70,13 +70,13 @@ def test_fusion_from_box_heatmaps_equals_predict(tiny, model):
         person = [[boxes[v][n - starts[v]] if w == v else None for w in range(3)]]
         ref = est.predict(Scene.from_person_boxes(views, person))
         np.testing.assert_allclose(alone.joints[n], ref.joints[0], atol=1e-2)
-        np.testing.assert_allclose(alone.confidence[n], ref.spread_mm[0], atol=1e-2)
+        np.testing.assert_allclose(alone.spread_mm[n], ref.spread_mm[0], atol=1e-2)
     members = np.array([[starts[0], starts[1], starts[2]], [starts[0] + 1, starts[1] + 1, -1]])
     fused = heat.estimate(members)
     persons = [[boxes[v][m - starts[v]] if m >= 0 else None for v, m in enumerate(row)] for row in members]
     ref = est.predict(Scene.from_person_boxes(views, persons))
     np.testing.assert_allclose(fused.joints, ref.joints, atol=1e-2)
-    np.testing.assert_allclose(fused.confidence, ref.spread_mm, atol=1e-2)
+    np.testing.assert_allclose(fused.spread_mm, ref.spread_mm, atol=1e-2)
     # A box lent to two views of the fusion is not the same as one view: the test can fail.
     assert not np.allclose(fused.joints[0], alone.joints[starts[0]], atol=1.0)
 

@@ -28,7 +28,7 @@ def setup(tmp_path_factory):
     pose = PoseEstimator(PoseNet(cfg), {"model": dataclasses.asdict(cfg)})
     data = write_tiny_mvor(tmp_path_factory.mktemp("tiny"), days=(1,), frames_per_day=2)
     # The paper's centre matcher: these tests compare its groups (the skeleton matcher, the default, groups by a
-    # random network's skeletons here; it has its own tests in tests/test_skeleton_matching.py).
+    # random network's skeletons here; it has its own tests in tests/pipeline/test_skeleton_matching.py).
     return (
         ScenePipeline(pose, config=PipelineConfig(matcher="centres")),
         data,

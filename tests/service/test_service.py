@@ -58,7 +58,7 @@ def server(tmp_path_factory):
         "ORPOSE_MAX_VIEWS": "4",
         "ORPOSE_MAX_BODY_BYTES": str(MAX_BODY),
         # The paper's centre matcher: with the tiny random pose network the skeleton matcher (the default, served
-        # in tests/test_skeleton_matching.py) groups by meaningless skeletons, and the checks below compare groups.
+        # in tests/pipeline/test_skeleton_matching.py) groups by meaningless skeletons, and the checks below compare groups.
         "ORPOSE_MATCHER": "centres",
     }
     srv = Server(env)
@@ -297,7 +297,7 @@ def bad_requests(tiny):
     ]  # fmt: skip
 
 
-TABLE_START = "<!-- bad-inputs: written by tests/test_service.py::test_every_bad_input_gets_its_4xx -->"
+TABLE_START = "<!-- bad-inputs: written by tests/service/test_service.py::test_every_bad_input_gets_its_4xx -->"
 TABLE_END = "<!-- bad-inputs: end -->"
 DOCS = REPO_ROOT / "docs" / "service.md"
 

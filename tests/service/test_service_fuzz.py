@@ -10,7 +10,7 @@ checked against the schema (status, headers, body) and none may be a 5xx.
 
 CI runs a short version (``ORPOSE_FUZZ_EXAMPLES``, default 30 /scenes cases); the long run of the issue::
 
-    ORPOSE_FUZZ_EXAMPLES=2000 pytest -q tests/test_service_fuzz.py -s    # prints the counts by status
+    ORPOSE_FUZZ_EXAMPLES=2000 pytest -q tests/service/test_service_fuzz.py -s    # prints the counts by status
 """
 
 from __future__ import annotations

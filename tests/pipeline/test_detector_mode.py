@@ -20,7 +20,7 @@ from posenet.net.infer import PoseEstimator
 from posenet.net.model import ModelConfig, PoseNet
 from posenet.scene import views_of
 
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).parents[2] / "benchmarks"))
 from detector_mode import single_view_errors, worst_poses  # noqa: E402
 
 

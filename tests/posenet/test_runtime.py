@@ -17,7 +17,7 @@ import posenet.runtime.execution as execution
 from posenet.runtime.execution import machine, machine_line, resolve_precision
 from posenet.runtime.graphs import BACKENDS, export_onnx, installed, resolve_backend
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 FRAME = REPO / "examples" / "frame"
 RUNTIMES = [b for b in ("onnxruntime", "openvino") if installed(b)]
 

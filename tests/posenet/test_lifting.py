@@ -36,7 +36,7 @@ def test_gradcheck_lift_and_aggregate():
 
     def f(lg, d, u):
         est = aggregate(lg, lift(cams, u, d), valid)
-        return est.joints, est.confidence
+        return est.joints, est.spread_mm
 
     assert torch.autograd.gradcheck(f, (logits, depth, uv))
 
@@ -56,7 +56,7 @@ def test_parity_with_numpy_loop():
             ref = w @ x
             np.testing.assert_allclose(est.joints[p, j].numpy(), ref, rtol=1e-9, atol=1e-7)
             spread = np.sqrt((w * ((x - ref) ** 2).sum(1)).sum())
-            np.testing.assert_allclose(est.confidence[p, j].numpy(), spread, rtol=1e-5)
+            np.testing.assert_allclose(est.spread_mm[p, j].numpy(), spread, rtol=1e-5)
 
 
 def test_lift_matches_pinhole_formula_and_extrinsics():
@@ -92,7 +92,7 @@ def test_single_view_and_peaked_heatmap():
     est = aggregate(logits, lift(cams, uv, depth), valid)
     target = lift(cams, uv, depth)[0, 0, 4]
     torch.testing.assert_close(est.joints[0], target.expand(2, 3))
-    assert (est.confidence < 1e-2).all()
+    assert (est.spread_mm < 1e-2).all()
     fused = fuse_2d(logits, uv, depth, valid, cams)
     torch.testing.assert_close(fused.joints[0], target.expand(2, 3))
 
@@ -104,7 +104,7 @@ def test_confidence_is_spread_in_mm():
         torch.zeros(1, 1, 1, 2, dtype=torch.float64), points, torch.ones(1, 1, 2, dtype=torch.bool)
     )
     torch.testing.assert_close(est.joints[0, 0], torch.tensor([100.0, 0, 1000], dtype=torch.float64))
-    assert abs(est.confidence.item() - 100.0) < 1e-3
+    assert abs(est.spread_mm.item() - 100.0) < 1e-3
 
 
 def test_all_masked_person_is_flagged():

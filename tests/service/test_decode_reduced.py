@@ -17,7 +17,7 @@ from service.decode import decode_color, decode_depth
 from service.response import _restore_sent_boxes
 from service.validation import Limits, parse_scene, validate_scene
 
-FRAME = Path(__file__).resolve().parents[1] / "examples" / "frame"
+FRAME = Path(__file__).resolve().parents[2] / "examples" / "frame"
 
 
 def _files(color_format: str = "jpg") -> dict[str, bytes]:

@@ -14,7 +14,7 @@ import torch
 from posenet.data.mvor import MvorDataset
 from posenet.synth.__main__ import main
 
-MVOR_JSON = Path(__file__).resolve().parents[1] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
+MVOR_JSON = Path(__file__).resolve().parents[2] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
 REAL_KEYS = {
     "dataset_info", "multiview_images", "categories", "cameras_info", "images", "annotations3D", "info",
     "licenses", "annotations",

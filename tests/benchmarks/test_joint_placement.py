@@ -10,7 +10,7 @@ import numpy as np
 from posenet.skeleton import NUM_JOINTS
 from posenet.synth.poses import PoseParams, build_pose
 
-sys.path.insert(0, str(Path(__file__).parents[1] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).parents[2] / "benchmarks"))
 from joint_placement import SIDE, TYPE_OF, corrected, errors, fit_offsets, frames  # noqa: E402
 
 

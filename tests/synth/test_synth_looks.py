@@ -29,7 +29,7 @@ from posenet.synth.skeleton_full import F, complete_legs
 from posenet.synth.twin import load_twin, twin_frame
 from posenet.synth.writer import frame_rng
 
-MVOR_JSON = Path(__file__).resolve().parents[1] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
+MVOR_JSON = Path(__file__).resolve().parents[2] / ".." / "shared" / "mvor" / "camma_mvor_2018.json"
 needs_mvor = pytest.mark.skipif(not MVOR_JSON.is_file(), reason=f"MVOR annotations not found at {MVOR_JSON}")
 TINY = ["--scenes", "1", "--days", "1", "--views", "2", "--seed", "3", "--quiet"]
 

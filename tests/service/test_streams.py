@@ -180,7 +180,7 @@ def test_the_offline_benchmark_finds_the_floor_as_a_stream_does(sequence, tmp_pa
     import copy
     from pathlib import Path
 
-    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[2] / "benchmarks"))
     sys.modules.pop("tracking", None)
     from tracking import detect, sequences
 
@@ -204,7 +204,7 @@ def test_the_offline_benchmark_measures_what_tracking_adds_to_a_stream_frame(seq
     tracker asked as a stream asks it; per sequence the frames and the milliseconds of each part and their sum."""
     from pathlib import Path
 
-    monkeypatch.syspath_prepend(str(Path(__file__).parents[1] / "benchmarks"))
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[2] / "benchmarks"))
     sys.modules.pop("tracking", None)
     from tracking import stream_cost
 
