@@ -21,7 +21,7 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
-from posenet.synth.looks import BODY_PARTS, DRAWN_GOWN_SHARE, GRAMMAR_SHARE, LOOKS, PARTS
+from posenet.synth.looks import BODY_PARTS, DRAWN_GOWN_SHARE, GRAMMAR_SHARE, LOOKS, MESH_SHARE, PARTS
 from posenet.synth.writer import (
     ANNOTATIONS,
     MIN_KEYPOINTS_IN_IMAGE,
@@ -101,7 +101,8 @@ def build_parser() -> argparse.ArgumentParser:
         choices=LOOKS,
         default=None,
         help="twin: the renderer's original look; random: bodies, clothing, light, camera, depth sensor and "
-        "occluders drawn per scene and person (to train on); alt: one fixed other look, never trained on "
+        "occluders drawn per scene and person (to train on); alt: one fixed other look, never trained on; "
+        "mesh: the random look with every body an anny mesh (needs the 'mesh' extra; docs/synth.md) "
         "(default: random for --scenes, twin for --from-mvor, whose numbers it reproduces)",
     )
     p.add_argument(
@@ -131,6 +132,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="random look: the share of people whose gown (when their outfit has one) is of a drawn cut, a cone "
         "of drawn height, flare and length, whatever builds their body; the rest wear their body model's own "
         f"skirt (default {DRAWN_GOWN_SHARE}: as before)",
+    )
+    p.add_argument(
+        "--mesh-share",
+        type=float,
+        default=MESH_SHARE,
+        metavar="F",
+        help="random look: the share of people drawn as anny mesh bodies (shaped, posed and dressed; needs the "
+        f"'mesh' extra), drawn after everything else of a person (default {MESH_SHARE}: as before; 0.5 is the "
+        "intended training share; --look mesh is a share of 1)",
     )
     p.add_argument(
         "--annotate",
@@ -164,6 +174,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
             look_parts=args.look_parts,
             grammar_share=args.grammar_share,
             drawn_gowns=args.drawn_gowns,
+            mesh_share=args.mesh_share,
         )
     # Procedural scenes and sequences: the same procedural world, one frame at a time or over time.
     common = dict(
@@ -177,6 +188,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
         look_parts=args.look_parts,
         grammar_share=args.grammar_share,
         drawn_gowns=args.drawn_gowns,
+        mesh_share=args.mesh_share,
         annotate=args.annotate,
     )
     if args.sequence:

@@ -117,6 +117,7 @@ class BodyShape:
     model: str = "twin"  # "alt": the alt look's own body model (posenet.synth.body_alt); "grammar":
     # primitives of drawn kinds (posenet.synth.body_grammar), drawn from the seed ``grammar``
     grammar: int | None = None
+    mesh: int | None = None  # model "mesh": the seed of the person's anny body (posenet.synth.mesh_body)
 
 
 TWIN_SHAPE = BodyShape()

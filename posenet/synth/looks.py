@@ -33,7 +33,7 @@ from posenet.synth.rig import Rig
 from posenet.synth.sensor import ColourSensorConfig, DepthSensorConfig, Lighting
 from posenet.synth.skeleton_full import NUM_FULL, F
 
-LOOKS = ("twin", "random", "alt")
+LOOKS = ("twin", "random", "alt", "mesh")
 PARTS = ("body", "clothes", "colour", "depth", "occluders")
 """The parts of a look that can be taken alone (``--look-parts``): body shape and joint placement; clothing,
 skin and hair; light, shading and colour camera; depth sensor (and its surface dropout); extra occluders."""
@@ -49,6 +49,12 @@ GRAMMAR_SHARE = 0.5  # default share of the random look's bodies built by posene
 # height, flare and length) whatever builds their body; the rest wear their body model's own skirt (the twin's
 # construction: an ellipsoid; the grammar's: an ellipsoid or a cone). 0 renders as before 2026-12-05.
 DRAWN_GOWN_SHARE = 0.0
+
+# Default share of the random look's people drawn as anny mesh bodies (posenet.synth.mesh_body), whatever else
+# they drew; 0 renders as before mesh bodies existed. The intended training value is 0.5 (half of the people
+# meshes, the other half primitives of both constructions), once the networks are retrained on it. The `mesh` look
+# is the random look with every body a mesh (the same bytes as `random` with a share of 1).
+MESH_SHARE = 0.0
 
 
 def check_share(share: float, name: str = "grammar_share") -> float:
@@ -96,23 +102,25 @@ class Look:
         parts=None,
         grammar_share: float = GRAMMAR_SHARE,
         drawn_gowns: float = DRAWN_GOWN_SHARE,
+        mesh_share: float = MESH_SHARE,
     ) -> None:
         if name not in LOOKS:
             raise ValueError(f"unknown look {name!r}; expected one of {LOOKS}")
         self.name, self.rng, self.parts = name, rng, parse_parts(parts)
         self.grammar_share = check_share(grammar_share)
         self.drawn_gowns = check_share(drawn_gowns, "drawn_gowns")
+        self.mesh_share = 1.0 if name == "mesh" else check_share(mesh_share, "mesh_share")
         self.scene, self.lighting = (None, None)
-        if name == "random":
+        if name in ("random", "mesh"):
             self.scene, self.lighting = random_scene(rng)
         elif name == "alt":
             self.scene, self.lighting = alt_scene()
 
     def dress(self, person) -> None:
         """Give a :class:`~posenet.synth.scene.Person` this look's outfit and body (in place)."""
-        if self.name == "random":
+        if self.name in ("random", "mesh"):
             outfit = random_outfit(self.rng, person.role)
-            shape = random_shape(self.rng, self.grammar_share, self.drawn_gowns)
+            shape = random_shape(self.rng, self.grammar_share, self.drawn_gowns, self.mesh_share)
         elif self.name == "alt":
             outfit, shape = alt_outfit(self.rng, person.role), ALT_SHAPE
         else:
@@ -131,7 +139,7 @@ class Look:
             return {}
         added = 0
         if "occluders" in self.parts:
-            if self.name == "random":
+            if self.name in ("random", "mesh"):
                 kinds = ("panel", "pole", "cart", "screen", "lamp", "stand")
                 n = int(self.rng.choice([0, 1, 2, 3, 4], p=[0.2, 0.3, 0.25, 0.15, 0.1]))
                 added = add_clutter(
@@ -157,10 +165,11 @@ def make_look(
     parts=None,
     grammar_share: float = GRAMMAR_SHARE,
     drawn_gowns: float = DRAWN_GOWN_SHARE,
+    mesh_share: float = MESH_SHARE,
 ) -> Look | None:
     """The :class:`Look` for ``name`` (only its ``parts``, default all), or None for ``twin`` (which draws
     nothing)."""
-    return None if name == "twin" else Look(name, rng, parts, grammar_share, drawn_gowns)
+    return None if name == "twin" else Look(name, rng, parts, grammar_share, drawn_gowns, mesh_share)
 
 
 # ------------------------------------------------------------------ random: bodies
@@ -192,7 +201,10 @@ def random_offsets(rng: np.random.Generator) -> np.ndarray:
 
 
 def random_shape(
-    rng: np.random.Generator, grammar_share: float = GRAMMAR_SHARE, drawn_gowns: float = DRAWN_GOWN_SHARE
+    rng: np.random.Generator,
+    grammar_share: float = GRAMMAR_SHARE,
+    drawn_gowns: float = DRAWN_GOWN_SHARE,
+    mesh_share: float = MESH_SHARE,
 ) -> BodyShape:
     """A body within anthropometric ranges: overall girth 0.88-1.18 of the twin's, each part +-10-20 % about
     it, chest and belly depths, shoulder and hip widths of the flesh, a paunch for 30 %, skull 0.92-1.08, and
@@ -202,7 +214,9 @@ def random_shape(
     none) gets a gown of a drawn cut whatever builds the body (:func:`~posenet.synth.body.gown_cone`: from
     30 mm below to 100 mm above the hip midpoint down to 0-350 mm below the knees, 40-130 mm beyond half the hip
     width at its top and 0-100 mm more at its bottom), worn when the outfit has a gown; it is drawn after
-    everything else, so a person's other draws stay those of ``drawn_gowns=0``."""
+    everything else, so a person's other draws stay those of ``drawn_gowns=0``. A share ``mesh_share`` (default
+    none) is an anny mesh body (:mod:`posenet.synth.mesh_body`, its phenotype drawn from a seed of its own),
+    drawn last of all for the same reason; it keeps the joint placement and the drawn gown's cut."""
     u = rng.uniform
     g = u(0.88, 1.18)
 
@@ -243,6 +257,8 @@ def random_shape(
         top = u(40, 130)
         shape = replace(shape, gown="cone", gown_top=u(-30, 100), gown_radii=(top, top + u(0, 100)),
                         gown_low=u(0, 350))  # fmt: skip
+    if mesh_share > 0 and rng.random() < mesh_share:
+        shape = replace(shape, model="mesh", mesh=int(rng.integers(2**31)))
     return shape
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 ELLIPSOID, CAPSULE, BOX, SHELL, CONE = 0, 1, 2, 3, 4
+MESH = 5  # a triangle mesh (``Primitive.mesh``), rasterised by posenet.synth.mesh_raster
 
 # Owner ids below zero are not persons (persons are 0, 1, 2, ...).
 OWNER_ROOM = -1  # furniture and equipment
@@ -39,6 +40,17 @@ class Material:
 
 
 @dataclass(frozen=True)
+class TriangleMesh:
+    """The triangles of a :data:`MESH` primitive: ``vertices (N, 3)`` mm, ``normals (N, 3)`` unit vertex
+    normals (interpolated over each triangle), ``faces (F, 3)`` vertex indices, wound counter-clockwise seen
+    from outside."""
+
+    vertices: np.ndarray
+    normals: np.ndarray
+    faces: np.ndarray
+
+
+@dataclass(frozen=True)
 class Primitive:
     """One shape.
 
@@ -50,6 +62,7 @@ class Primitive:
         a, b: (3,) capsule segment end points (unused for other kinds).
         owner: person index (>= 0), OWNER_ROOM or OWNER_SHELL.
         material: its :class:`Material`.
+        mesh: the triangles of a MESH primitive (whose ``center`` and ``size[0]`` are a bounding sphere).
     """
 
     kind: int
@@ -60,10 +73,16 @@ class Primitive:
     material: Material
     a: np.ndarray | None = None
     b: np.ndarray | None = None
+    mesh: TriangleMesh | None = None
 
     def to_camera(self, T: np.ndarray) -> Primitive:
         """The same primitive in a camera frame; ``T (4, 4)`` maps world points to camera points."""
         R, t = T[:3, :3], T[:3, 3]
+        if self.mesh is not None:
+            m = self.mesh
+            moved = TriangleMesh(m.vertices @ R.T.astype(m.vertices.dtype) + t.astype(m.vertices.dtype),
+                                 m.normals @ R.T.astype(m.normals.dtype), m.faces)  # fmt: skip
+            return replace(self, center=R @ self.center + t, rotation=R @ self.rotation, mesh=moved)
         a = None if self.a is None else R @ self.a + t
         b = None if self.b is None else R @ self.b + t
         return replace(self, center=R @ self.center + t, rotation=R @ self.rotation, a=a, b=b)
@@ -74,7 +93,7 @@ class Primitive:
             return [(self.a, float(self.size[0])), (self.b, float(self.size[0]))]
         if self.kind == CONE:  # the hull of two spheres projects inside the box of their projections
             return [(self.a, float(self.size[0])), (self.b, float(self.size[1]))]
-        if self.kind == ELLIPSOID:
+        if self.kind in (ELLIPSOID, MESH):
             return [(self.center, float(self.size.max()))]
         return [(self.center, float(np.linalg.norm(self.size)))]
 
@@ -104,6 +123,16 @@ def round_cone(a, b, radius_a, radius_b, owner=OWNER_ROOM, material=None) -> Pri
 def box(center, half_sizes, rotation=None, owner=OWNER_ROOM, material=None) -> Primitive:
     rot = np.eye(3) if rotation is None else np.asarray(rotation, float)
     return Primitive(BOX, np.asarray(center, float), rot, np.asarray(half_sizes, float), owner, material)
+
+
+def triangle_mesh(vertices, normals, faces, owner=OWNER_ROOM, material=None) -> Primitive:
+    """A :data:`MESH` primitive; its bounding sphere is centred on the vertices' bounding box."""
+    vertices = np.asarray(vertices)
+    lo, hi = vertices.min(0), vertices.max(0)
+    center = (lo + hi).astype(float) / 2
+    radius = float(np.sqrt(((vertices - center) ** 2).sum(1).max())) + 1.0
+    mesh = TriangleMesh(vertices, np.asarray(normals), np.asarray(faces))
+    return Primitive(MESH, center, np.eye(3), np.array([radius, 0.0, 0.0]), owner, material, mesh=mesh)
 
 
 def shell(center, half_sizes, material=None) -> Primitive:

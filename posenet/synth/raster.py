@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from posenet.synth.primitives import HIT, Primitive, normals
+from posenet.synth.mesh_raster import rasterize_mesh
+from posenet.synth.primitives import HIT, MESH, Primitive, normals
 
 NEAR_MM = 100.0  # nothing closer than 10 cm to a camera is drawn
 
@@ -88,16 +89,24 @@ def rasterize(prims: list[Primitive], K: Intrinsics) -> GBuffer:
     dv = (np.arange(H) - K.cy) / K.fy  # (H,)
     depth = np.full((H, W), np.inf)
     prim = np.full((H, W), -1, np.int32)
+    mesh_normal = None  # (3, H, W) normals of the pixels that meshes own (they come with the depth)
     for i, p in enumerate(prims):
         rect = screen_rect(p, K)
         if rect is None:
             continue
         u0, u1, v0, v1 = rect
-        t = HIT[p.kind](p, du[None, u0:u1], dv[v0:v1, None])  # (h, w)
+        if p.kind == MESH:
+            t, n = rasterize_mesh(p, K, rect)
+        else:
+            t = HIT[p.kind](p, du[None, u0:u1], dv[v0:v1, None])  # (h, w)
         zb = depth[v0:v1, u0:u1]
         closer = (t < zb) & (t > NEAR_MM)
         zb[closer] = t[closer]
         prim[v0:v1, u0:u1][closer] = i
+        if p.kind == MESH:
+            if mesh_normal is None:
+                mesh_normal = np.zeros((3, H, W), np.float32)
+            mesh_normal[:, v0:v1, u0:u1][:, closer] = n[:, closer]
 
     normal = np.zeros((3, H * W), np.float32)
     flat = prim.ravel()
@@ -114,5 +123,8 @@ def rasterize(prims: list[Primitive], K: Intrinsics) -> GBuffer:
         if i < 0:
             continue
         sl = slice(start, bounds[k + 1])
+        if prims[i].kind == MESH:
+            normal[:, order[sl]] = mesh_normal.reshape(3, -1)[:, order[sl]]
+            continue
         normal[:, order[sl]] = normals(prims[i], x[sl], y[sl], z[sl])
     return GBuffer(depth, prim, normal.reshape(3, H, W))

