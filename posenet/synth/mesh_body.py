@@ -507,8 +507,28 @@ def _garment_parts(flags: tuple[bool, ...]) -> tuple[tuple[int, np.ndarray, np.n
     return tuple(out)
 
 
+_RECENT: dict = {}  # the last bodies built: a frame asks for its people's primitives several times
+
+
 def mesh_primitives(points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape) -> list[Primitive]:
-    """The primitives of one mesh body (one MESH primitive per garment, plus a gown's skirt cone)."""
+    """The primitives of one mesh body (one MESH primitive per garment, plus a gown's skirt cone).
+
+    A frame builds its people's primitives several times (the twin's occluder fitting, visibility, each render);
+    the last 32 bodies are kept, keyed by the skeleton's bytes, the owner and the outfit and shape objects (held
+    by the entry, so their ids stay theirs)."""
+    key = (points.tobytes(), owner, id(outfit), id(shape))
+    if key in _RECENT:
+        return list(_RECENT[key][0])
+    prims = _build_mesh_primitives(points, outfit, owner, shape)
+    if len(_RECENT) >= 32:
+        _RECENT.pop(next(iter(_RECENT)))
+    _RECENT[key] = (prims, outfit, shape)
+    return list(prims)
+
+
+def _build_mesh_primitives(
+    points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape
+) -> list[Primitive]:
     r = rig()
     faces = r.model.faces
     flags = (outfit.cap is not None, outfit.hair is not None, outfit.mask is not None, bool(outfit.hood),
