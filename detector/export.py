@@ -32,6 +32,7 @@ from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
 from detector.predict import predict_records
 from posenet.boxes import coco_to_xyxy
+from posenet.cli import add_annotations, add_data, add_threads, annotations_path, set_threads
 
 
 def nms_results(results: list[dict], iou: float | None) -> list[dict]:
@@ -120,8 +121,8 @@ def main(argv: list[str] | None = None) -> Path:
     p.add_argument(
         "--out", required=True, help="NAME.safetensors (NAME.json is written beside it) or a folder"
     )
-    p.add_argument("--data", help="dataset root, for --threshold-days")
-    p.add_argument("--annotations", help="MVOR-format annotation json, for --threshold-days")
+    add_data(p, required=False, help="dataset root, for --threshold-days")
+    add_annotations(p, help="MVOR-format annotation json, for --threshold-days (default: DATA/annotations.json)")
     p.add_argument(
         "--threshold-days", type=int, nargs="+", help="set the score threshold on these (training) days"
     )
@@ -149,10 +150,10 @@ def main(argv: list[str] | None = None) -> Path:
     p.add_argument(
         "--trained-on", help="a line saying what the weights were trained on (shown by GET /model)"
     )
-    p.add_argument("--threads", type=int, help="torch CPU threads")
+    add_threads(p)
     args = p.parse_args(argv)
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    set_threads(args.threads)
+    args.annotations = annotations_path(args)
     threshold, metrics = args.threshold, None
     nms_iou = None if args.no_nms else args.nms_iou if args.nms_iou is not None else "keep"
     if args.threshold_days:

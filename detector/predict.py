@@ -15,12 +15,12 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import torch
 from tqdm import tqdm
 
 from detector.data import ImageRecord, load_records, read_record
 from detector.infer import PersonDetector
 from posenet.boxes import xyxy_to_coco
+from posenet.cli import add_annotations, add_data, add_days, add_threads, annotations_path, set_threads
 
 
 def predict_records(
@@ -59,13 +59,13 @@ def main(argv: list[str] | None = None) -> list[dict]:
         description="Run a trained person detector on every view of an MVOR-format dataset; "
         "write COCO results.",
     )
-    parser.add_argument("--data", required=True, help="dataset root (holds dayD/camC/color/NNNNNN.png)")
-    parser.add_argument("--annotations", required=True, help="MVOR-format annotation json listing the images")
+    add_data(parser)
+    add_annotations(parser, help="MVOR-format annotation json listing the images (default: DATA/annotations.json)")
     parser.add_argument(
         "--checkpoint",
         help="run folder or .safetensors of detector.train (default: detector/weights/default)",
     )
-    parser.add_argument("--days", type=int, nargs="+", help="only these recording days (default: all)")
+    add_days(parser)
     parser.add_argument("--out", required=True, help="COCO results json to write")
     parser.add_argument("--score-threshold", type=float, default=0.01, help="lowest person probability kept")
     parser.add_argument("--batch-size", type=int, default=6, help="views per forward pass")
@@ -79,13 +79,11 @@ def main(argv: list[str] | None = None) -> list[dict]:
         "--no-nms", action="store_true", help="no non-maximum suppression, whatever the checkpoint says"
     )
     parser.add_argument("--device", default="cpu")
-    parser.add_argument(
-        "--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)"
-    )
+    add_threads(parser)
     args = parser.parse_args(argv)
 
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    set_threads(args.threads)
+    args.annotations = annotations_path(args)
     detector = PersonDetector.from_checkpoint(args.checkpoint, args.device)
     if args.no_nms or args.nms_iou is not None:
         detector.cfg = replace(detector.cfg, nms_iou=None if args.no_nms else args.nms_iou)

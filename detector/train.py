@@ -36,6 +36,7 @@ from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
 from detector.model import ARCHS, DetectorConfig, build_detector, param_groups, preset
 from detector.predict import predict_records
+from posenet.cli import add_annotations, add_data, add_threads, annotations_path, set_threads
 from posenet.data.mvor import read_annotation_json
 from posenet.net.checkpoint_files import train_state_file
 
@@ -228,8 +229,8 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     g = p.add_argument_group("data")
-    g.add_argument("--data", required=True, help="dataset root in MVOR's layout (dayD/camC/{color,depth}/)")
-    g.add_argument("--annotations", required=True, help="MVOR-format annotation json")
+    add_data(g)
+    add_annotations(g)
     g.add_argument("--holdout-day", type=int, help="recording day held out for evaluation (the fold)")
     g.add_argument(
         "--train-days", type=int, nargs="+", help="days to train on (default: all but the held-out)"
@@ -302,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--eval-every", type=int, help="evaluate the held-out day every N epochs (0: only at the end)"
     )
-    g.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    add_threads(g)
     g = p.add_argument_group("output")
     g.add_argument("--out", required=True, help="run folder for checkpoints, config and log")
     g.add_argument("--resume", action="store_true", help="continue the run in --out from its last checkpoint")
@@ -312,8 +313,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> list[dict]:
     args = build_parser().parse_args(argv)
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    set_threads(args.threads)
+    args.annotations = annotations_path(args)
     out = Path(args.out)
     base = TRAIN_PRESETS[args.preset]
     if args.resume and (out / "config.json").is_file():

@@ -40,6 +40,7 @@ from pipeline.skeleton_matching import (
     split_unsure,
 )
 from posenet.boxes import boxes_of_person, coco_to_xyxy, dense_boxes, iou_xyxy, match_persons, person_ids
+from posenet.cli import add_annotations, add_data, add_days, add_threads, annotations_path, set_threads
 from posenet.scene import views_of
 
 # As pipeline.two_stage.PipelineConfig.max_match_combinations: frames beyond it are refused, not enumerated.
@@ -217,12 +218,12 @@ def main(argv: list[str] | None = None) -> dict:
         prog="python -m pipeline.association",
         description="Group boxes across views with the 3D matcher and count persons found, split and merged.",
     )
-    parser.add_argument("--data", required=True, help="dataset root (needs the depth images)")
-    parser.add_argument("--annotations", required=True, help="MVOR-format annotation json")
+    add_data(parser)
+    add_annotations(parser)
     parser.add_argument(
         "--predictions", help="COCO results of detector.predict (default: the reference boxes)"
     )
-    parser.add_argument("--days", type=int, nargs="+", help="only these recording days")
+    add_days(parser)
     parser.add_argument("--score-threshold", type=float, default=0.5, help="lowest detection score used")
     parser.add_argument("--threshold-mm", type=float, default=750.0, help="the matcher's t (paper: 75 cm)")
     parser.add_argument(
@@ -235,7 +236,7 @@ def main(argv: list[str] | None = None) -> dict:
         help="centres: the paper's 3D box centres; skeletons: each box's single-view skeleton (pose network)",
     )  # fmt: skip
     parser.add_argument("--pose-checkpoint", help="the skeleton matcher's pose weights (default: shipped)")
-    parser.add_argument("--threads", type=int, help="torch threads for the skeleton matcher's pose network")
+    add_threads(parser, help="torch threads for the skeleton matcher's pose network")
     sweep = parser.add_argument_group(
         "skeleton matcher thresholds (several values: every combination is scored from the same heatmaps)"
     )
@@ -278,16 +279,14 @@ def main(argv: list[str] | None = None) -> dict:
 
     pose, modalities = None, ("depth",)
     if args.matcher == "skeletons":
-        import torch
 
         from posenet.net.infer import PoseEstimator
 
-        if args.threads:
-            torch.set_num_threads(args.threads)
+        set_threads(args.threads)
         pose = PoseEstimator.from_checkpoint(args.pose_checkpoint, threads=args.threads)
         if pose.model.config.inputs.modality != "depth":
             modalities = ("color", "depth")
-    samples = MvorDataset(args.data, args.annotations, subsample=1, modalities=modalities, days=args.days)
+    samples = MvorDataset(args.data, annotations_path(args), subsample=1, modalities=modalities, days=args.days)
     predictions = None
     if args.predictions:
         predictions = json.loads(Path(args.predictions).read_text())

@@ -26,6 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 from pipeline.matching import match_boxes
+from posenet.cli import add_data, add_days, add_threads
 from posenet.data.mvor import MvorDataset, load_annotations
 
 
@@ -63,17 +64,17 @@ def main(argv: list[str] | None = None) -> list[dict]:
         description="Detect persons in every view and group the boxes across views into persons (3D box-centre "
         "matcher); write them with person ids for `posenet.training.adapt --boxes detector`.",
     )
-    p.add_argument("--data", required=True, help="dataset root (dayD/camC/{color,depth}/NNNNNN.png)")
+    add_data(p)
     p.add_argument(
         "--annotations", required=True, help="MVOR-format json: frames and cameras (no 3D poses read)"
     )
-    p.add_argument("--days", type=int, nargs="+", help="only these recording days (default: all)")
+    add_days(p)
     p.add_argument("--checkpoint", help="detector checkpoint (default: detector/weights/default)")
     p.add_argument("--predictions", help="detector.predict's COCO results instead of running the detector")
     p.add_argument("--score-threshold", type=float, help="lowest score kept (default: the checkpoint's)")
     p.add_argument("--threshold-mm", type=float, default=750.0, help="the matcher's largest centre distance")
     p.add_argument("--device", default="cpu")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    add_threads(p)
     p.add_argument("--out", required=True, help="json list of {image_id, bbox, person_id, score}")
     args = p.parse_args(argv)
 

@@ -420,7 +420,7 @@ class ScenePipeline:
             joints = np.asarray(prediction.joints, dtype=np.float64)  # (P, J, 3)
             spread = torch.as_tensor(prediction.spread_mm, dtype=torch.float64).cpu()  # (P, J) mm
             support = torch.tensor([len(p.support) for p in persons])  # (P,)
-            confidence = self.pose.calibration(spread, support).numpy()  # (P, J) in [0, 1]
+            confidence = self.pose.calibration(spread, support, torch.as_tensor(joints)).numpy()  # (P, J) in [0, 1]
             for p, person in enumerate(persons):
                 person.joints, person.confidence = joints[p], confidence[p]
                 person.spread_mm = spread[p].numpy()

@@ -47,6 +47,7 @@ import httpx
 from tqdm import tqdm
 
 from posenet.boxes import ground_truth_ids, identified
+from posenet.cli import add_days
 from posenet.data.images import depth_file_name
 from posenet.data.mvor import MvorDataset, load_annotations
 from posenet.data.sample import Sample
@@ -452,7 +453,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--reference-boxes", action="store_true", help="send the annotated boxes (no detection)"
     )
-    parser.add_argument("--days", type=int, nargs="+", help="only these recording days (default: all)")
+    add_days(parser)
     parser.add_argument(
         "--evaluate", action="store_true", help="print the MPJPE tables of the output at the end"
     )

@@ -6,8 +6,8 @@ anything left out.
   it should not happen; if it does, the cause is in the calibration or the depth, not in the server).
 - Boxes are reported as the client sent them. Validation clips a box that is partly outside its image for
   the computation (``ValidatedScene.sent_boxes`` keeps the originals).
-- ``notes`` say why persons are missing: a view without valid depth, or a person (by id) whose boxes hold no
-  valid depth.
+- ``notes`` say why persons are missing or doubtful: a view without valid depth, a person (by id) whose boxes
+  hold no valid depth, or a one-view person whose skeleton has no person's size (``posenet.net.plausibility``).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import numpy as np
 from pipeline.two_stage import PersonResult, SceneResult
 from posenet.boxes import hull
 from posenet.cameras import rescale_pixels
+from posenet.net.plausibility import ONE_VIEW_CAP, body_scale, implausible
 from posenet.skeleton import JOINTS
 from service.errors import InputError
 from service.schemas import Joint, Person, SceneOut, Support, Timings
@@ -47,6 +48,17 @@ def _notes(persons: list[PersonResult], scene: ValidatedScene) -> list[str]:
         for v, view in enumerate(scene.views)
         if not view.depth.any()
     ]
+    if persons:
+        joints = np.stack([p.joints for p in persons])
+        flagged = implausible(joints, [len(p.support) for p in persons])
+        notes += [
+            f"person {p.id} is seen by one view only and its skeleton is {scale:.0%} of an adult's size: its depth "
+            "is likely not the person's (the heatmaps lie on what is behind or beside them), so its confidence is "
+            f"capped at {ONE_VIEW_CAP}; a second view of this person, or a box that fits them more tightly, would "
+            "settle it"
+            for p, scale, bad in zip(persons, body_scale(joints), flagged, strict=True)
+            if bad
+        ]
     if scene.person_ids is not None:
         found = {p.id for p in persons}
         missing = sorted({int(i) for ids in scene.person_ids for i in ids} - found)

@@ -200,8 +200,9 @@ class SceneOut(BaseModel):
     persons: list[Person] = Field(..., description="everyone found in the frame (empty when nobody is)")
     notes: list[str] = Field(
         default_factory=list,
-        description="why something is missing: a view without valid depth, or a person (by id) whose "
-        "boxes hold no valid depth and who is therefore left out",
+        description="why something is missing or doubtful: a view without valid depth, a person (by id) whose "
+        "boxes hold no valid depth and who is therefore left out, or a person seen by one view whose skeleton "
+        "has no person's size (its confidence capped)",
     )
     timings: Timings = Field(..., description="server milliseconds per stage of this request")
 

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from posenet.cli import add_days, add_threads, set_threads
 from posenet.evaluation.evaluate import match_predictions
 from posenet.net.calibration import Calibration, fit, reliability
 from posenet.net.checkpoint import checkpoint_files, load_checkpoint
@@ -142,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR[:D,D]",
         help="fit data: MVOR-format dataset roots (DIR/annotations.json), repeatable; pooled",
     )
-    p.add_argument("--days", type=int, nargs="*", default=None, help="fit days of a --data without its own")
+    add_days(p, nargs="*", help="fit days of a --data without its own")
     p.add_argument(
         "--test", type=data_set, action="append", default=[], metavar="DIR[:D,D]", help="test sets"
     )
@@ -152,14 +153,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", type=Path, default=None, help="reliability diagram PNG")
     p.add_argument("--json", type=Path, default=None, help="write the fit and the reliability numbers here")
     p.add_argument("--cache", type=Path, default=Path("runs/calibrate_cache"), help="measured joints cache")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    add_threads(p)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    set_threads(args.threads)
     _, config_file = checkpoint_files(args.checkpoint)
     model, config = load_checkpoint(args.checkpoint, "cpu", "fp32")
     fit_sets = [(folder, args.days if days is None else days) for folder, days in args.data]

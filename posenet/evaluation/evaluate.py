@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from posenet.cli import add_annotations, add_days
 from posenet.data.mvor import check_annotations, image_day, load_annotations, pose_joints
 from posenet.data.support import pose_support
 from posenet.skeleton import JOINT_TYPES, NUM_JOINTS, SUPPORT_TYPES
@@ -372,7 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
             "the paper's last table."
         ),
     )
-    parser.add_argument("--annotations", required=True, help="MVOR-format ground-truth json (annotations3D)")
+    add_annotations(parser, required=True, help="MVOR-format ground-truth json (annotations3D)")
     parser.add_argument(
         "--predictions",
         required=True,
@@ -380,9 +381,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="prediction json list; repeat to concatenate files (e.g. one per fold)",
     )
     parser.add_argument("--json", help="also write the numbers to this file (machine-readable)")
-    parser.add_argument(
-        "--days", type=int, nargs="+", help="evaluate only these recording days (default: all days)"
-    )
+    add_days(parser, help="evaluate only these recording days (default: all days)")
     parser.add_argument(
         "--folds", action="store_true", help="score each day as one fold; report mean and std over the days"
     )

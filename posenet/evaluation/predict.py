@@ -18,9 +18,9 @@ import json
 import sys
 from pathlib import Path
 
-import torch
 from tqdm import tqdm
 
+from posenet.cli import add_annotations, add_data, add_days, add_threads, annotations_path, set_threads
 from posenet.evaluation.evaluate import prediction_record
 from posenet.net.infer import PoseEstimator
 from posenet.net.inputs import InputConfig, reduction
@@ -89,10 +89,8 @@ def build_parser() -> argparse.ArgumentParser:
         "the "
         "reference person boxes of the annotation file, and write them in posenet.evaluation.evaluate's format.",
     )
-    p.add_argument("--data", required=True, help="dataset root holding dayD/camC/{color,depth}/NNNNNN.png")
-    p.add_argument(
-        "--annotations", required=True, help="MVOR-format annotation json (boxes, cameras, frames)"
-    )
+    add_data(p)
+    add_annotations(p, help="MVOR-format annotation json: boxes, cameras, frames (default: DATA/annotations.json)")
     p.add_argument(
         "--checkpoint",
         default=None,
@@ -100,12 +98,10 @@ def build_parser() -> argparse.ArgumentParser:
         "beside "
         "it; default: the shipped posenet/weights/default.safetensors",
     )
-    p.add_argument(
-        "--days", type=int, nargs="*", default=None, help="recording days to predict (default: all)"
-    )
+    add_days(p, nargs="*", help="recording days to predict (default: all)")
     p.add_argument("--out", required=True, help="output json of predictions")
     p.add_argument("--scenes-per-batch", type=int, default=4, help="scenes that share one U-Net forward pass")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    add_threads(p)
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda")
     p.add_argument(
         "--precision", choices=PRECISIONS, default="auto", help="how this machine runs it (posenet.runtime.execution)"
@@ -121,12 +117,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    set_threads(args.threads)
     estimator = PoseEstimator.from_checkpoint(
         args.checkpoint, args.device, args.precision, flip_test=args.flip_test
     )
-    data = read_dataset(args.data, args.annotations, estimator.model.config.inputs, args.days)
+    data = read_dataset(args.data, annotations_path(args), estimator.model.config.inputs, args.days)
     preds = predict_samples(estimator, data, args.scenes_per_batch)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(json.dumps(preds))

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from posenet.net.plausibility import ONE_VIEW_CAP, implausible
 from posenet.skeleton import JOINT_TYPES, NUM_JOINTS
 
 Tensor = torch.Tensor
@@ -83,16 +84,22 @@ class Calibration:
             "info": self.info,
         }
 
-    def __call__(self, spread_mm: Tensor, support: Tensor) -> Tensor:
+    def __call__(self, spread_mm: Tensor, support: Tensor, joints: Tensor | None = None) -> Tensor:
         """Confidence (..., J) in [0, 1] of joints with spreads ``spread_mm (..., J)`` mm, of persons supported
-        by ``support (...)`` views. Any device and float dtype; the result has ``spread_mm``'s."""
+        by ``support (...)`` views. Any device and float dtype; the result has ``spread_mm``'s. With the
+        persons' ``joints (..., J, 3)``, a one-view skeleton without a person's size (``posenet.net.plausibility``)
+        is capped at ``ONE_VIEW_CAP``."""
         if spread_mm.shape[-1:] != (NUM_JOINTS,) or support.shape != spread_mm.shape[:-1]:
             raise ValueError(
                 f"spread_mm must be (..., {NUM_JOINTS}) and support (...), got {tuple(spread_mm.shape)} and "
                 f"{tuple(support.shape)}"
             )
         joint = torch.arange(NUM_JOINTS, device=spread_mm.device).expand(spread_mm.shape)  # (..., J)
-        return self.per_joint(spread_mm, joint, support.unsqueeze(-1).expand(spread_mm.shape))
+        confidence = self.per_joint(spread_mm, joint, support.unsqueeze(-1).expand(spread_mm.shape))
+        if joints is None or not confidence.numel():
+            return confidence
+        bad = torch.as_tensor(implausible(joints.detach().cpu(), support.cpu()), device=confidence.device)
+        return torch.where(bad.unsqueeze(-1), confidence.clamp_max(ONE_VIEW_CAP), confidence)
 
     def per_joint(self, spread_mm: Tensor, joint: Tensor, support: Tensor) -> Tensor:
         """Confidence of single joints: ``spread_mm``, ``joint`` (indices, MVOR order) and ``support`` (views)

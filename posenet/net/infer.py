@@ -176,7 +176,7 @@ class PoseEstimator:
             out.joints.cpu(),
             spread,
             (out.has_points & scene.has_box.any(1).to(out.has_points.device)).cpu(),
-            self.calibration(spread, scene.support),  # (P, J) in [0, 1]
+            self.calibration(spread, scene.support, out.joints.cpu()),  # (P, J) in [0, 1]
         )
         if inputs is not None:
             pred.heatmaps, pred.uv, pred.depth, pred.valid = (

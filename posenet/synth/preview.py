@@ -15,6 +15,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from posenet.cli import add_data
+
 
 def depth_colour(depth: np.ndarray, near: float = 500.0, far: float = 6000.0) -> np.ndarray:
     """(H, W, 3) BGR visualisation of uint16 mm depth (0 = unknown, drawn black)."""
@@ -64,7 +66,7 @@ def contact_sheet(root: Path, frames: list[int], scale: float = 0.5) -> np.ndarr
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--data", required=True, help="dataset folder with annotations.json")
+    add_data(p)
     p.add_argument("--frames", type=int, nargs="+", default=[0], help="multi-view frame indices, one per row")
     p.add_argument("--scale", type=float, default=0.5, help="resize factor of the sheet")
     p.add_argument("--out", required=True, help="PNG to write")

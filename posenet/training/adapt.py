@@ -45,6 +45,7 @@ import torch
 from safetensors.torch import load_file
 from tqdm import tqdm
 
+from posenet.cli import add_annotations, add_data, add_days, add_threads
 from posenet.evaluation.predict import read_subsample
 from posenet.net.augment import AugmentConfig
 from posenet.net.checkpoint import (
@@ -446,13 +447,9 @@ def build_parser() -> argparse.ArgumentParser:
         + "\n".join(line for line in __doc__.splitlines() if line.startswith("    python")),
     )
     g = p.add_argument_group("target data (no 3D poses are read)")
-    g.add_argument(
-        "--data", required=True, help="recordings in MVOR's layout: dayD/camC/{color,depth}/NNNNNN.png"
-    )
-    g.add_argument(
-        "--annotations", help="MVOR-format json: frames, cameras, boxes (default: DATA/annotations.json)"
-    )
-    g.add_argument("--days", type=int, nargs="+", help="days to adapt on (default: all in the file)")
+    add_data(g, help="recordings in MVOR's layout: dayD/camC/{color,depth}/NNNNNN.png")
+    add_annotations(g, help="MVOR-format json: frames, cameras, boxes (default: DATA/annotations.json)")
+    add_days(g, help="days to adapt on (default: all in the file)")
     g.add_argument(
         "--boxes",
         choices=("annotations", "detector"),
@@ -521,7 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--source-per-step", type=int, default=d.source_per_step, help="labelled scenes per step")
     g.add_argument("--seed", type=int, default=d.seed, help="seed of the order and the augmentation")
     g = p.add_argument_group("runtime")
-    g.add_argument("--threads", type=int, help="torch CPU threads")
+    add_threads(g)
     g.add_argument("--device", help="cpu or cuda (default: cuda if available)")
     g.add_argument("--precision", default=d.precision, help="U-Net precision here: auto, fp32 or bf16")
     g.add_argument("--resume", action="store_true", help="continue the run in --out from last/")

@@ -36,6 +36,7 @@ import torch.distributed as dist
 from tqdm import tqdm
 
 from posenet.boxes import person_ids
+from posenet.cli import add_annotations, add_data, add_threads
 from posenet.net.augment import AugmentConfig, detector_like_boxes
 from posenet.net.checkpoint import save_checkpoint, sectioned, training_config
 from posenet.net.inputs import InputConfig, build_scene, record_read_size
@@ -530,10 +531,8 @@ def build_parser() -> argparse.ArgumentParser:
         + "\n".join(line for line in __doc__.splitlines() if line.strip().startswith(("python", "torchrun"))),
     )
     g = p.add_argument_group("data")
-    g.add_argument(
-        "--data", required=True, help="dataset root (MVOR layout: dayD/camC/{color,depth}/NNNNNN.png)"
-    )
-    g.add_argument("--annotations", help="MVOR-format annotation json (default: DATA/annotations.json)")
+    add_data(g)
+    add_annotations(g)
     g.add_argument(
         "--extra-data",
         nargs="+",
@@ -656,7 +655,7 @@ def build_parser() -> argparse.ArgumentParser:
         "small, truncated, or holding a second person (extension for detector mode; 0: off)",
     )
     g = p.add_argument_group("runtime")
-    g.add_argument("--threads", type=int, help="torch CPU threads")
+    add_threads(g)
     g.add_argument("--device", help="cpu or cuda (default: cuda if available)")
     g.add_argument(
         "--resume", action="store_true", help="continue the run in --out from last/ (else a fresh run)"

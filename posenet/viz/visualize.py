@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from posenet.cli import add_annotations, add_data, add_days, annotations_path
 from posenet.net.infer import PoseEstimator, PosePrediction
 from posenet.net.lifting import lift, masked_logits
 from posenet.skeleton import BONES, JOINT_COLOURS, JOINTS, NUM_JOINTS
@@ -147,13 +148,13 @@ def build_parser() -> argparse.ArgumentParser:
         "the per-joint heatmaps of one person, and a 3D plot of the lifted point clouds with the predicted "
         "skeletons (colour) and the ground truth (black), like the paper's Figures 3 and 4.",
     )
-    p.add_argument("--data", required=True, help="dataset root (dayD/camC/{color,depth}/NNNNNN.png)")
-    p.add_argument("--annotations", required=True, help="MVOR-format annotation json")
+    add_data(p)
+    add_annotations(p)
     p.add_argument(
         "--checkpoint", default=None, help="checkpoint folder or .safetensors (default: shipped weights)"
     )
     p.add_argument("--frame", default="0", help="frame index in the dataset, or a multi-view id")
-    p.add_argument("--days", type=int, nargs="*", default=None, help="only these days (indexing follows)")
+    add_days(p, nargs="*", help="only these days (indexing follows)")
     p.add_argument("--person", type=int, default=0, help="which boxed person (0-based) gets the heatmap row")
     p.add_argument("--out", required=True, help="output PNG")
     return p
@@ -165,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     from posenet.scene import Scene
 
     est = PoseEstimator.from_checkpoint(args.checkpoint)
-    data = read_dataset(args.data, args.annotations, est.model.config.inputs, args.days)
+    data = read_dataset(args.data, annotations_path(args), est.model.config.inputs, args.days)
     index = data.ids.index(args.frame) if args.frame in data.ids else int(args.frame)
     if not 0 <= index < len(data):
         raise ValueError(f"--frame {args.frame}: the dataset has {len(data)} frames")

@@ -8,11 +8,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from conftest import write_tiny_mvor
 
 REPO = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 def test_look_transfer_reports_in_and_cross_look_per_modality(tmp_path):
     one = write_tiny_mvor(tmp_path / "look_a", seed=0)
     other = write_tiny_mvor(tmp_path / "look_b", seed=1)

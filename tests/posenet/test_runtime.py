@@ -214,6 +214,7 @@ def test_int8_is_asked_for_and_never_auto(monkeypatch):
     assert torch_side.name == "fp32" and "OpenVINO" in torch_side.reason
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not installed("openvino"), reason="openvino is not installed")
 def test_int8_graphs_are_calibrated_once_and_stay_near_float32(example_frame, tmp_path, monkeypatch):
     """The shipped weights quantized on 2 rendered calibration scenes: on the example frame, the detector's

@@ -58,6 +58,7 @@ def client_cmd(data, url, out, *extra) -> list[str]:
             "--url", url, "--out", str(out), *extra]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_client_resumes_after_being_killed(tmp_path):
     data = write_tiny_mvor(tmp_path / "tiny", days=(1, 2), frames_per_day=4)
     ids = [mv["id"] for mv in data.gt["multiview_images"]]
