@@ -9,6 +9,8 @@ The MVOR twin (all 732 real frames, real rig, real 3D poses):
     --workers 2
 The unseen-look test set (the same frames, another renderer's look; never train on it):
     python -m posenet.synth --out data/mvor_alt --from-mvor ../shared/mvor/camma_mvor_2018.json --look alt
+The second unseen-look test set (the alt renderer with anny mesh bodies; never train or tune on it either):
+    python -m posenet.synth --out data/mvor_altmesh --from-mvor ../shared/mvor/camma_mvor_2018.json --look alt-mesh
 A sequence (60 frames at 15 fps, 3 clinicians walking around the table, MVOR's rig):
     python -m posenet.synth --out data/seq_mvorrig --sequence --frames 60 --persons 3 --rig mvor
 """
@@ -102,7 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="twin: the renderer's original look; random: bodies, clothing, light, camera, depth sensor and "
         "occluders drawn per scene and person (to train on); alt: one fixed other look, never trained on; "
-        "mesh: the random look with every body an anny mesh (needs the 'mesh' extra; docs/synth.md) "
+        "mesh: the random look with every body an anny mesh (needs the 'mesh' extra; docs/synth.md); "
+        "alt-mesh: the alt look with anny mesh bodies, the second fixed look never trained or tuned on "
         "(default: random for --scenes, twin for --from-mvor, whose numbers it reproduces)",
     )
     p.add_argument(

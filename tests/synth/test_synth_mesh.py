@@ -1,5 +1,7 @@
 """Mesh bodies (anny): same seed same bytes, joints fitted to MVOR's definitions, boxes and poses in MVOR's schema,
-depth that is the mesh's, occlusion by the z-buffer, and the random look unchanged at a mesh share of 0.
+depth that is the mesh's, occlusion by the z-buffer, and the random look unchanged at a mesh share of 0; the
+alt-mesh look (the alt renderer with mesh bodies): same seed same bytes, other pixels than alt and mesh on the same
+poses, and alt's fixed sensors, light and outfits.
 
 The first test on a machine builds the mesh's arrays with anny (about 80 s on 2 cores the very first time anny
 runs, a few seconds once anny has cached its own data; then read from the runtime cache)."""
@@ -49,9 +51,10 @@ def test_same_seed_same_bytes(mesh):
     assert ja["annotations"] == jb["annotations"] and ja["annotations3D"] == jb["annotations3D"]
 
 
-def test_mesh_people_get_boxes_and_poses_in_mvors_schema(mesh):
-    ann = json.loads((mesh / "a" / "annotations.json").read_text())
-    assert ann["dataset_info"]["synthetic"]["look"] == "mesh"
+@pytest.mark.parametrize("look, render", [("mesh", "mesh"), ("alt-mesh", "altmesh")])
+def test_mesh_people_get_boxes_and_poses_in_mvors_schema(look, render, request):
+    ann = json.loads((request.getfixturevalue(render) / "a" / "annotations.json").read_text())
+    assert ann["dataset_info"]["synthetic"]["look"] == look
     posed = [a for a in ann["annotations"] if a["person_id"] >= 0]
     assert posed, "a clinician is boxed with an id"
     for a in posed:
@@ -61,6 +64,7 @@ def test_mesh_people_get_boxes_and_poses_in_mvors_schema(mesh):
         assert (kp[:, 2] == 2).sum() >= 4
         inside = kp[kp[:, 2] == 2]
         assert ((inside[:, 0] >= x - 2) & (inside[:, 0] <= x + w + 2)).mean() > 0.9
+    assert ann["annotations3D"]
     for p in ann["annotations3D"]:
         assert np.reshape(p["keypoints3D"], (12, 4)).shape == (12, 4)
 
@@ -175,3 +179,72 @@ def test_a_mesh_share_of_zero_draws_what_the_random_look_drew():
         assert np.array_equal(meshy.offsets, plain.offsets)
         a.random()  # mesh_share draws one number, then the seed: keep the generators in step
         a.integers(2**31)
+
+
+# ------------------------------------------------------------------ alt-mesh: the second unseen look
+
+
+@pytest.fixture(scope="module")
+def altmesh(tmp_path_factory):
+    """The same tiny procedural scene in alt-mesh (twice), alt and mesh."""
+    root = tmp_path_factory.mktemp("altmesh")
+    for name, look in (("a", "alt-mesh"), ("b", "alt-mesh"), ("alt", "alt"), ("mesh", "mesh")):
+        main(["--out", str(root / name), *TINY, "--look", look])
+    return root
+
+
+def _images(root: Path) -> dict:
+    return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*.png"))}
+
+
+def test_alt_mesh_same_seed_same_bytes(altmesh):
+    a, b = _images(altmesh / "a"), _images(altmesh / "b")
+    assert a and a == b
+    ja, jb = (json.loads((altmesh / n / "annotations.json").read_text()) for n in "ab")
+    assert ja["annotations"] == jb["annotations"] and ja["annotations3D"] == jb["annotations3D"]
+
+
+def test_alt_mesh_differs_from_alt_and_mesh_with_the_same_poses(altmesh):
+    ours = _images(altmesh / "a")
+    ann = json.loads((altmesh / "a" / "annotations.json").read_text())
+    for other in ("alt", "mesh"):
+        theirs = _images(altmesh / other)
+        assert theirs.keys() == ours.keys()
+        for kind in ("color", "depth"):
+            names = [k for k in ours if f"/{kind}/" in k.as_posix()]
+            assert names and all(ours[k] != theirs[k] for k in names), (other, kind)
+        # One seed, one scene: the same poses and rig whatever the look (visibility flags are the look's).
+        other_ann = json.loads((altmesh / other / "annotations.json").read_text())
+        ours3d, theirs3d = (
+            [np.reshape(p["keypoints3D"], (-1, 4))[:, :3] for p in a["annotations3D"]]
+            for a in (ann, other_ann)
+        )
+        assert len(ours3d) == len(theirs3d)
+        assert all(np.array_equal(u, v) for u, v in zip(ours3d, theirs3d, strict=True))
+        assert other_ann["images"] == ann["images"]
+
+
+def test_alt_mesh_is_the_alt_renderer_with_mesh_bodies():
+    """Fixed like alt: alt's sensors, light and outfits (the same draws), an anny body of alt's coat cut."""
+    from posenet.synth.looks import ALT_COAT, HELD_OUT, Look, alt_outfit
+
+    assert "alt-mesh" in HELD_OUT
+    pts = _poses(1, seed=3)[0]
+    scenes = []
+    for seed in (0, 1):
+        rng, ref = np.random.default_rng(seed), np.random.default_rng(seed)
+        look = Look("alt-mesh", rng)
+        alt = Look("alt", np.random.default_rng(seed))
+        people = [Person(pts, sample_outfit(np.random.default_rng(9)), i) for i in range(3)]
+        for p in people:
+            look.dress(p)
+            assert p.outfit == alt_outfit(ref, "clinician")
+            assert p.shape.model == "mesh" and p.shape.mesh is not None and p.shape.offsets is None
+            cut = {k: getattr(p.shape, k) for k in ALT_COAT}
+            assert cut == ALT_COAT
+        assert len({p.shape.mesh for p in people}) == 3, "each person has a body of their own"
+        assert look.rng.random() == ref.random(), "the bodies' seeds leave the look's draws as alt's"
+        assert look.scene.depth == alt.scene.depth and look.scene.colour == alt.scene.colour
+        assert look.scene.name == "alt-mesh"
+        scenes.append(look.scene)
+    assert scenes[0].depth == scenes[1].depth and scenes[0].colour == scenes[1].colour, "no per-scene draws"
