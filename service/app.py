@@ -8,6 +8,8 @@ into ``app.state.pipeline``, unless a ready pipeline is passed in (tests, offlin
 
 from __future__ import annotations
 
+import logging
+import time
 from contextlib import asynccontextmanager
 
 import anyio
@@ -21,7 +23,8 @@ from pipeline.track import Tracker, TrackerConfig
 from pipeline.two_stage import PipelineConfig, ScenePipeline
 from service.errors import InputError
 from service.limits import BodyLimitMiddleware, InFlightLimiter
-from service.routes import docs_router, protected, public
+from service.metrics import Metrics, RequestCounter
+from service.routes import docs_router, metrics_router, protected, public
 from service.schemas import SceneIn
 from service.settings import Settings
 from service.streams import StreamRegistry
@@ -37,25 +40,57 @@ def pipeline_config(settings: Settings) -> PipelineConfig:
     )
 
 
+def load_pipeline(settings: Settings) -> tuple[ScenePipeline, dict[str, float]]:
+    """Both models from ``settings``' checkpoints (``ScenePipeline.from_checkpoints``), one after the other, and
+    the seconds each took to load (``orpose_model_load_seconds``)."""
+    t0 = time.perf_counter()
+    pipeline = ScenePipeline.from_checkpoints(
+        settings.pose_checkpoint,
+        None,
+        settings.device,
+        False,
+        pipeline_config(settings),
+        settings.precision,
+        settings.backend,
+        settings.threads,
+        settings.flip_test,
+    )
+    seconds = {"pose": time.perf_counter() - t0}
+    load_detector = settings.load_detector
+    if load_detector is False:
+        return pipeline, seconds
+    # Imported only when needed: transformers takes seconds to import.
+    from detector.checkpoint import read_config
+    from detector.infer import DEFAULT_WEIGHTS, PersonDetector
+
+    checkpoint = settings.detector_checkpoint
+    if load_detector is None and checkpoint is None and not DEFAULT_WEIGHTS.is_file():
+        logging.getLogger(__name__).warning(
+            "no detector weights at %s and ORPOSE_DETECTOR_CHECKPOINT unset: serving reference-box mode only "
+            "(requests must carry boxes)",
+            DEFAULT_WEIGHTS,
+        )
+        return pipeline, seconds
+    t0 = time.perf_counter()
+    detector = PersonDetector.from_checkpoint(
+        checkpoint, settings.device, settings.precision, settings.backend, settings.threads
+    )
+    seconds["detector"] = time.perf_counter() - t0
+    meta = read_config(checkpoint or DEFAULT_WEIGHTS)
+    return ScenePipeline(pipeline.pose, detector, pipeline.config, meta), seconds
+
+
 @asynccontextmanager
 async def lifespan(app: FastAPI):
     settings: Settings = app.state.settings
     torch.set_num_threads(settings.threads)
     app.state.inference_limiter = anyio.CapacityLimiter(settings.inference_workers)
+    metrics: Metrics = app.state.metrics
     if app.state.pipeline is None:
-        app.state.pipeline = await anyio.to_thread.run_sync(
-            lambda: ScenePipeline.from_checkpoints(
-                settings.pose_checkpoint,
-                settings.detector_checkpoint,
-                settings.device,
-                settings.load_detector,
-                pipeline_config(settings),
-                settings.precision,
-                settings.backend,
-                settings.threads,
-                settings.flip_test,
-            )
-        )
+        app.state.pipeline, seconds = await anyio.to_thread.run_sync(lambda: load_pipeline(settings))
+        metrics.models(app.state.pipeline, seconds)
+    else:
+        metrics.models(app.state.pipeline)
     yield
     app.state.pipeline = None
 
@@ -110,6 +145,8 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
     app.state.settings = settings
     app.state.pipeline = pipeline
     app.state.in_flight = InFlightLimiter(settings.max_in_flight)
+    app.state.metrics = metrics = Metrics()
+    receiving = InFlightLimiter(settings.max_receiving)
     tracker = tracker_config(settings)
     app.state.streams = StreamRegistry(
         settings.max_streams,
@@ -119,21 +156,56 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
         floor_up=settings.track_floor_up,
         unsure=bool(settings.track_unsure_gate_mm),
     )
+    _watch(app, metrics, receiving)
     app.add_middleware(
         BodyLimitMiddleware,
         max_bytes=settings.max_body_bytes,
         timeout_s=settings.body_timeout_s,
         max_receiving=settings.max_receiving,
         retry_after_s=settings.retry_after_s,
+        receiving=receiving,
+        rejected=metrics.rejected,
     )
     app.add_exception_handler(InputError, _input_error)
-    app.include_router(public)
-    app.include_router(protected)
-    app.include_router(
-        docs_router(lambda: app.openapi(), protect=settings.token is not None and not settings.public_docs)
-    )
+    routers = [
+        public,
+        protected,
+        metrics_router(protect=settings.token is not None and not settings.metrics_open),
+        docs_router(lambda: app.openapi(), protect=settings.token is not None and not settings.public_docs),
+    ]
+    for router in routers:
+        app.include_router(router)
+    # Added last, so outermost: it also counts what the body limit answers before any route.
+    routes = [route for router in routers for route in router.routes]
+    app.add_middleware(RequestCounter, metrics=metrics, routes=routes)
     app.openapi = lambda: _openapi(app)
     return app
+
+
+def _watch(app: FastAPI, metrics: Metrics, receiving: InFlightLimiter) -> None:
+    """The gauges read the limiters' and the streams' own counters when Prometheus scrapes (on the event loop,
+    like every change to them)."""
+
+    def inference(field: str):
+        def read() -> float:
+            limiter = getattr(app.state, "inference_limiter", None)  # made in the lifespan
+            return 0.0 if limiter is None else getattr(limiter.statistics(), field)
+
+        return read
+
+    streams: StreamRegistry = app.state.streams
+
+    def active_streams() -> float:
+        now = streams.now()
+        return sum(1 for s in streams.streams.values() if s.users or now - s.last_used <= streams.idle_s)
+
+    metrics.watch(
+        in_flight=lambda: app.state.in_flight.in_flight,
+        waiting=inference("tasks_waiting"),
+        running=inference("borrowed_tokens"),
+        receiving=lambda: receiving.in_flight,
+        streams=active_streams,
+    )
 
 
 def __getattr__(name: str):

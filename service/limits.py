@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 
 import anyio
 from starlette.exceptions import HTTPException
@@ -28,16 +29,27 @@ class BodyLimitMiddleware:
 
     The receiving place is taken on the app's first read of the body, that is after the route's dependencies
     (the token) have passed, and given back when the body is complete or the request ends.
+
+    ``receiving``: the limiter of receiving places, when the app reads it too (the metrics); ``rejected``: called
+    with the reason of each refusal (``service.metrics.REJECTIONS``).
     """
 
     def __init__(
-        self, app: ASGIApp, max_bytes: int, timeout_s: float, max_receiving: int = 32, retry_after_s: int = 1
+        self,
+        app: ASGIApp,
+        max_bytes: int,
+        timeout_s: float,
+        max_receiving: int = 32,
+        retry_after_s: int = 1,
+        receiving: InFlightLimiter | None = None,
+        rejected: Callable[[str], None] | None = None,
     ) -> None:
         self.app = app
         self.max_bytes = max_bytes
         self.timeout_s = timeout_s
-        self.receiving = InFlightLimiter(max_receiving)
+        self.receiving = receiving if receiving is not None else InFlightLimiter(max_receiving)
         self.retry_after_s = retry_after_s
+        self.rejected = rejected or (lambda reason: None)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -51,6 +63,7 @@ class BodyLimitMiddleware:
                 await _send_error(send, 400, "Content-Length is not an integer")
                 return
             if declared_bytes > self.max_bytes:
+                self.rejected("body_too_large")
                 await _send_error(send, 413, self._too_large(declared_bytes))
                 return
         received = 0
@@ -70,6 +83,7 @@ class BodyLimitMiddleware:
                 return await receive()
             if not holding:
                 if not self.receiving.try_acquire():
+                    self.rejected("receiving_full")
                     raise HTTPException(
                         503,
                         f"the server is receiving {self.receiving.capacity} uploads already "
@@ -82,10 +96,12 @@ class BodyLimitMiddleware:
                     message = await receive()
             except TimeoutError:
                 detail = f"the request body did not arrive within {self.timeout_s:g} s"
+                self.rejected("body_timeout")
                 raise HTTPException(408, detail) from None
             if message["type"] == "http.request":
                 received += len(message.get("body", b""))
                 if received > self.max_bytes:
+                    self.rejected("body_too_large")
                     raise HTTPException(413, self._too_large(received))
                 done = not message.get("more_body", False)
             elif message["type"] == "http.disconnect":

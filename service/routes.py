@@ -3,13 +3,15 @@
 Routes stay thin: ``/scenes`` reads the multipart form into memory, hands the parts to ``service.validation``
 (decoding, off the event loop), runs the pipeline on an inference worker thread, and serialises the result.
 ``POST /streams/{stream_id}/frames`` takes the same form through the same code (:func:`scene_result`) and
-hands the result to its stream (``service.streams``); ``DELETE /streams/{stream_id}`` ends one.
+hands the result to its stream (``service.streams``); ``DELETE /streams/{stream_id}`` ends one. ``GET /metrics``
+serves the app's Prometheus metrics (``service.metrics``), which both frame routes feed.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
+from contextlib import AsyncExitStack, asynccontextmanager
 from typing import Annotated
 
 import anyio
@@ -24,12 +26,13 @@ from starlette.requests import ClientDisconnect
 from pipeline.two_stage import ScenePipeline, SceneResult
 from service.cancel import ClientGone, run_until_disconnected
 from service.deps import PipelineDep, SettingsDep, StreamsDep, inference_slot, require_token
-from service.errors import UNSUPPORTED_MEDIA, InputError
+from service.errors import PAYLOAD_TOO_LARGE, UNSUPPORTED_MEDIA, InputError
+from service.metrics import SCENES, STREAM_FRAMES, Metrics
 from service.model_info import model_info
 from service.response import encode
 from service.schemas import Error, Health, ModelInfo, Ready, SceneOut, StreamEnded, StreamFrameOut
 from service.settings import Settings
-from service.streams import MAX_TIMESTAMP_S, check_stream_id, parse_timestamp
+from service.streams import MAX_TIMESTAMP_S, Frame, StreamRegistry, check_stream_id, parse_timestamp
 from service.validation import Limits, ValidatedScene, parse_scene, validate_scene
 
 public = APIRouter()
@@ -118,6 +121,61 @@ def docs_router(openapi: Callable[[], dict], protect: bool) -> APIRouter:
         return get_redoc_html(openapi_url="/openapi.json", title=title)
 
     return router
+
+
+def metrics_router(protect: bool) -> APIRouter:
+    """``GET /metrics``; behind the token if ``protect`` (a token is set and ORPOSE_METRICS_OPEN is not)."""
+    router = APIRouter(
+        dependencies=[Depends(require_token)] if protect else [], responses=_UNAUTHORIZED if protect else {}
+    )
+
+    @router.get(
+        "/metrics",
+        response_class=Response,
+        responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}}}},
+        summary="Prometheus metrics: latency per stage, requests by status, rejections, queues, streams, models",
+    )
+    async def metrics(request: Request) -> Response:
+        body, content_type = request.app.state.metrics.exposition(request.headers.get("accept"))
+        return Response(body, media_type=content_type)
+
+    return router
+
+
+@asynccontextmanager
+async def _admitted(
+    request: Request, settings: Settings, streams: StreamRegistry | None = None, **frame
+) -> AsyncIterator[Frame | None]:
+    """An inference slot (``inference_slot``) and, for a stream's frame, the stream (``StreamRegistry.frame``,
+    with ``frame``'s arguments), yielding the stream's frame or None; a refusal of either is counted in
+    ``orpose_rejections_total``."""
+    metrics: Metrics = request.app.state.metrics
+    async with AsyncExitStack() as stack:
+        try:
+            await stack.enter_async_context(inference_slot(request, settings))
+        except HTTPException:
+            metrics.rejected("in_flight_full")
+            raise
+        if streams is None:
+            yield None
+            return
+        try:
+            taken = await stack.enter_async_context(streams.frame(**frame))
+        except HTTPException as exc:
+            if exc.status_code == 503:
+                metrics.rejected("streams_full")
+            raise
+        yield taken
+
+
+async def _result(request, pipeline, scene_text, files, t_start, unsure=None):
+    """:func:`scene_result`, with an image over ORPOSE_MAX_IMAGE_PIXELS counted as a rejection."""
+    try:
+        return await scene_result(request, pipeline, scene_text, files, t_start, unsure)
+    except InputError as exc:
+        if exc.status == PAYLOAD_TOO_LARGE:
+            request.app.state.metrics.rejected("image_too_large")
+        raise
 
 
 @public.get("/health", response_model=Health, summary="Liveness: the process answers")
@@ -227,9 +285,22 @@ async def post_scene(request: Request, pipeline: PipelineDep, settings: Settings
     # Receiving the body holds a receiving place (service.limits), never an inference slot.
     texts, files = await _read_form(request, settings)
     scene_text = _scene_part(texts)
-    async with inference_slot(request, settings):
-        result, scene, decode_ms = await scene_result(request, pipeline, scene_text, files, t_start)
-    return Response(encode(result, scene, decode_ms, t_start), media_type="application/json")
+    async with _admitted(request, settings):
+        result, scene, decode_ms = await _result(request, pipeline, scene_text, files, t_start)
+    t_encode = time.perf_counter()
+    body = encode(result, scene, decode_ms, t_start)
+    _observe(request, SCENES, result, decode_ms, t_encode, t_start)
+    return Response(body, media_type="application/json")
+
+
+def _observe(
+    request: Request, route: str, result: SceneResult, decode_ms: float, t_encode: float, t_start: float
+) -> None:
+    """An answered frame's stage times into the histograms (``t_encode``, ``t_start``: perf_counter readings)."""
+    t_end = time.perf_counter()
+    request.app.state.metrics.frame(
+        route, result.mode, result.timings, decode_ms, (t_end - t_encode) * 1e3, (t_end - t_start) * 1e3
+    )
 
 
 def _scene_part(texts: dict[str, bytes]) -> bytes:
@@ -348,11 +419,14 @@ async def post_stream_frame(
     texts, files = await _read_form(request, settings, ("scene", "timestamp_s"))
     scene_text = _scene_part(texts)
     timestamp_s = parse_timestamp(texts.get("timestamp_s"))
-    async with inference_slot(request, settings), streams.frame(stream_id, timestamp_s, received) as frame:
-        result, scene, decode_ms = await scene_result(
+    frame_of = {"stream_id": stream_id, "timestamp_s": timestamp_s, "received": received}
+    async with _admitted(request, settings, streams, **frame_of) as frame:
+        result, scene, decode_ms = await _result(
             request, pipeline, scene_text, files, t_start, unsure=frame.prepare
         )
-        body = frame.answer(result, scene, decode_ms, t_start)
+        t_encode = time.perf_counter()
+        body = frame.answer(result, scene, decode_ms, t_start)  # the tracker's update and the body
+    _observe(request, STREAM_FRAMES, result, decode_ms, t_encode, t_start)
     return Response(body, media_type="application/json")
 
 

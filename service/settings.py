@@ -190,6 +190,12 @@ class Settings(BaseSettings):
     public_docs: bool = Field(
         False, description="serve /docs, /redoc and /openapi.json without the token (when a token is set)"
     )
+    # Prometheus scrapers often carry no token: this serves GET /metrics without one (it tells request counts,
+    # latencies and the models' runtimes, never a request's content).
+    metrics_open: bool = Field(
+        False,
+        description="serve GET /metrics without the token (when a token is set), for Prometheus scrapers",
+    )
     # Unset: load the detector when a checkpoint is given or shipped weights exist; otherwise serve reference-box
     # mode only (detector-mode requests then get a 422 that says so) rather than refusing to start.
     load_detector: bool | None = Field(
