@@ -79,7 +79,8 @@ def _checked_size(data: bytes, name: str, max_pixels: int) -> tuple[int, int]:
         raise InputError(f"{name} has an invalid size {width}x{height}")
     if width * height > max_pixels:
         raise InputError(
-            f"{name} is {width}x{height} = {width * height} pixels, more than the limit of {max_pixels}",
+            f"{name} is {width}x{height} = {width * height} pixels, more than the server's limit of {max_pixels} "
+            "(ORPOSE_MAX_IMAGE_PIXELS): send the camera's native resolution, or raise the limit on the server",
             PAYLOAD_TOO_LARGE,
         )
     return width, height

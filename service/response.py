@@ -47,7 +47,7 @@ def _notes(persons: list[PersonResult], scene: ValidatedScene) -> list[str]:
         f"depth_{v} holds no valid depth (every pixel is 0, unknown): view {v} supports nobody"
         for v, view in enumerate(scene.views)
         if not view.depth.any()
-    ]
+    ] + list(scene.notes)
     if persons:
         joints = np.stack([p.joints for p in persons])
         flagged = implausible(joints, [len(p.support) for p in persons])

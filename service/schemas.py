@@ -12,76 +12,22 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from posenet.rig.rigfile import MAX_PIXELS_COORD, CameraIn, Size
 from posenet.skeleton import JOINTS
 
 # Fixed-length lists, not tuples: FastAPI writes tuples as OpenAPI 3.0 `items` arrays, which 3.1 rejects.
 # Every input number is bounded to what is physically meaningful, so that nothing a client sends can overflow
-# the arithmetic downstream (fx = 5e-324 or a translation of 1e308 once gave NaN joints in a 200 response).
-MAX_PIXELS_COORD = 1e5  # pixel coordinates and focal lengths: no camera has 100 000 pixels across
-MAX_TRANSLATION_MM = 1e5  # 100 m: far beyond any operating room
-MAX_DISTORTION = 100.0  # |OpenCV coefficient|; real calibrations stay within about 20 (MVOR's largest: 13.3)
+# the arithmetic downstream (fx = 5e-324 or a translation of 1e308 once gave NaN joints in a 200 response). The
+# camera's schema (CameraIn) is posenet.rig.rigfile's: rig.json and the request parse one and the same object.
 MAX_PERSON_ID = 2**53 - 1  # the largest integer that every JSON reader (IEEE doubles) holds exactly
 
 PixelCoord = Annotated[float, Field(ge=-MAX_PIXELS_COORD, le=MAX_PIXELS_COORD)]
 Box = Annotated[list[PixelCoord], Field(min_length=4, max_length=4)]
 Vector3 = Annotated[list[float], Field(min_length=3, max_length=3)]
-Size = Annotated[list[Annotated[int, Field(ge=1, le=65535)]], Field(min_length=2, max_length=2)]
-Distortion = Annotated[
-    list[Annotated[float, Field(ge=-MAX_DISTORTION, le=MAX_DISTORTION)]], Field(min_length=5, max_length=5)
-]
-# Rotation entries lie in [-1, 1] (the rigidity check), translations within MAX_TRANSLATION_MM.
-MatrixEntry = Annotated[float, Field(ge=-MAX_TRANSLATION_MM, le=MAX_TRANSLATION_MM)]
-Matrix4 = Annotated[
-    list[Annotated[list[MatrixEntry], Field(min_length=4, max_length=4)]], Field(min_length=4, max_length=4)
-]
 PersonId = Annotated[int, Field(ge=0, le=MAX_PERSON_ID)]
 
 
 # ----------------------------------------------------------------------------------------------- request
-class CameraIn(BaseModel):
-    """One view's calibration (MVOR's ``cameras_info.camParams`` for that camera, in these names)."""
-
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-
-    fx: float = Field(
-        ..., ge=1, le=MAX_PIXELS_COORD, description="focal length along x, pixels (MVOR: focallength[0])"
-    )
-    fy: float = Field(
-        ..., ge=1, le=MAX_PIXELS_COORD, description="focal length along y, pixels (MVOR: focallength[1])"
-    )
-    cx: float = Field(
-        ...,
-        ge=0,
-        le=MAX_PIXELS_COORD,
-        description="principal point x, pixels (MVOR: principalpoint[0]); inside the image",
-    )
-    cy: float = Field(
-        ...,
-        ge=0,
-        le=MAX_PIXELS_COORD,
-        description="principal point y, pixels (MVOR: principalpoint[1]); inside the image",
-    )
-    distortion: Distortion | None = Field(
-        None,
-        description="OpenCV order (k1, k2, p1, p2, k3), each within +-100, or null for an ideal pinhole. "
-        "MVOR stores "
-        "(k1, k2, k3, p1, p2) and its own 3D annotations ignore distortion: send null for MVOR.",
-    )
-    extrinsics: Matrix4 = Field(
-        ...,
-        description="4x4 rigid transform T(view->reference), row-major, translation in mm: p_ref = R "
-        "p_view + t, each entry within +-1e5 (translations up to 100 m). "
-        "The reference frame is the one these transforms map into; with MVOR's calibration "
-        "(cameras_info.camParams.extrinsics[v] reshaped to 4x4) it is camera 0's, whose T is the identity.",
-    )
-    image_size: Size | None = Field(
-        None,
-        description="(width, height) in pixels the intrinsics were calibrated for; if given, the "
-        "images "
-        "sent must have exactly this size (MVOR: imagesize)",
-    )
-
-
 class ViewIn(BaseModel):
     """One view of the scene. Its images are the form's file parts ``color_<i>`` and ``depth_<i>``."""
 

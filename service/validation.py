@@ -10,14 +10,15 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pydantic
-import torch
 
-from posenet.cameras import Camera, is_rigid
+from posenet.cameras import Camera, is_rigid, rescale_pixels
 from posenet.net.inputs import reduction
+from posenet.rig.check import scene_findings
+from posenet.rig.rigfile import camera_of
 from posenet.scene import SceneView
 from service.decode import decode_color, decode_depth, header_size
 from service.errors import InputError
@@ -50,6 +51,8 @@ class ValidatedScene:
         reduced: per view the factor k its images were decoded smaller by (1: as sent). ``views`` and
             ``boxes`` are in those reduced pixels (u' = (u + 0.5) / k - 0.5, as ``Camera.scale``).
         up: (3,) unit vector, the room's up direction in the reference frame, or None (not sent).
+        notes: named findings about the views that go with the answer (``posenet.rig.check.scene_findings``:
+            ``views_disagree``); those that make any answer wrong are refused with a 422 instead.
     """
 
     views: list[SceneView]
@@ -58,6 +61,19 @@ class ValidatedScene:
     sent_boxes: list[np.ndarray] | None = None
     reduced: list[int] | None = None
     up: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def _problem(err: dict) -> str:
+    """One of pydantic's errors in the client's terms (``views.0.camera.extrinsics: ...``)."""
+    loc = [str(p) for p in err["loc"]]
+    where = ".".join(loc) or "scene"
+    if "extrinsics" in loc and err["type"] in ("too_short", "too_long"):
+        return (
+            f"{where}: {err['msg']}; extrinsics is the 4x4 matrix T(view->reference) as 4 rows of 4 numbers "
+            "(a 3x4 [R | t] needs the row [0, 0, 0, 1] appended)"
+        )
+    return f"{where}: {err['msg']}"
 
 
 def parse_scene(text: str | bytes, limits: Limits) -> SceneIn:
@@ -65,9 +81,7 @@ def parse_scene(text: str | bytes, limits: Limits) -> SceneIn:
     try:
         scene = SceneIn.model_validate_json(text)
     except pydantic.ValidationError as exc:
-        problems = "; ".join(
-            f"{'.'.join(str(p) for p in err['loc']) or 'scene'}: {err['msg']}" for err in exc.errors()[:5]
-        )
+        problems = "; ".join(_problem(err) for err in exc.errors()[:5])
         raise InputError(f"scene JSON is invalid: {problems}") from None
     if not scene.views:
         raise InputError("scene has 0 views; send at least one view (camera + depth_0 image)")
@@ -90,14 +104,14 @@ def _camera(view: ViewIn, i: int, width: int, height: int) -> Camera:
             f"{width}x{height} "
             "image; the intrinsics were probably calibrated for another resolution"
         )
-    T = torch.tensor(cam.extrinsics, dtype=torch.float64)
-    if not bool(is_rigid(T)):
+    camera = camera_of(cam, size=(width, height))
+    if not bool(is_rigid(camera.extrinsics)):
         raise InputError(
             f"{where}.extrinsics is not a rigid transform (the rotation must be orthonormal with "
             f"determinant +1 "
             "and the last row (0, 0, 0, 1)); send T(view->reference) with translation in mm"
         )
-    return Camera.create(cam.fx, cam.fy, cam.cx, cam.cy, T, cam.distortion, size=(width, height))
+    return camera
 
 
 def _boxes(
@@ -236,7 +250,7 @@ def _validated(
         camera = _camera(view, i, width, height)
         views.append(SceneView(color, depth, camera if k == 1 else camera.scale(1 / k)))
         boxes, ids = _boxes(view, i, width, height, limits)
-        all_boxes.append(boxes if k == 1 else ((boxes + 0.5) / k - 0.5).astype(np.float32))
+        all_boxes.append(boxes if k == 1 else rescale_pixels(boxes, 1 / k).astype(np.float32))
         all_ids.append(ids)
     if not any(v.depth.any() for v in views):
         raise InputError(
@@ -244,12 +258,17 @@ def _validated(
             "16-bit depth in mm (check that the depth files are not blank and depth_scale_mm is right)"
         )
     up = _up(scene.up)
+    findings = scene_findings([v.camera for v in views], [v.depth for v in views])
+    for f in findings:
+        if f.error:
+            raise InputError(f"{f.name}: {f.message}")
+    notes = [f"{f.name}: {f.message}" for f in findings]
     if not reference_mode:
-        return ValidatedScene(views, None, None, reduced=reduced, up=up)
+        return ValidatedScene(views, None, None, reduced=reduced, up=up, notes=notes)
     has_ids = any(ids is not None for ids in all_ids)
     ids = [np.zeros(0, np.int64) if x is None else x for x in all_ids] if has_ids else None
     sent = [np.asarray(v.boxes or [], dtype=np.float64).reshape(-1, 4) for v in scene.views]
-    return ValidatedScene(views, all_boxes, ids, sent, reduced, up)
+    return ValidatedScene(views, all_boxes, ids, sent, reduced, up, notes)
 
 
 def _up(up: list[float] | None) -> np.ndarray | None:

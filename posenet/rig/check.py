@@ -16,7 +16,9 @@ absolute difference and the share within 50 mm, over the points visible to both.
 
 from __future__ import annotations
 
+import itertools
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -117,8 +119,9 @@ def depth_checks(depths: list[np.ndarray]) -> list[tuple[str, str]]:
 
 def lift_depth(camera: Camera, depth: np.ndarray, stride: int = 4) -> torch.Tensor:
     """(N, 3) reference-frame points of every ``stride``-th valid pixel of a (H, W) uint16 mm depth image."""
-    grid = pixel_grid(*depth.shape, dtype=torch.float64)[::stride, ::stride].reshape(-1, 2)  # (N, 2)
-    d = torch.as_tensor(depth[::stride, ::stride].astype(np.float64)).reshape(-1)
+    sub = depth[::stride, ::stride]
+    grid = (pixel_grid(*sub.shape, dtype=torch.float64) * stride).reshape(-1, 2)  # (N, 2): pixels of the image
+    d = torch.as_tensor(sub.astype(np.float64)).reshape(-1)
     keep = d > 0
     return camera.unproject(grid[keep], d[keep])[1]
 
@@ -225,3 +228,68 @@ def floor_of_frame(
         step = stride or max(1, round(math.sqrt(d.size / FLOOR_POINTS_PER_VIEW)))
         clouds.append(lift_depth(c.to(dtype=torch.float64), d, step))
     return find_floor(torch.cat(clouds), guess)
+
+
+# What a request's cameras and depth images must satisfy for its answer to be right (``scene_findings``).
+# Views of a calibrated rig that see the same surfaces agree on 0.19-0.6 of them (day 4 of the twin, alt and
+# alt-mesh looks, sequences: p5 0.28-0.59), random rigs' wide baselines down to 0.11; swapped views 0.01-0.05.
+AGREE_SHARE_MIN = 0.08
+OVERLAP_MIN = 0.1  # pairs that share less are not compared
+SCENE_STRIDE = 16  # every 16th pixel: a few thousand points per 640x480 view, a few ms per frame
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One named problem of a scene: ``error`` when its answer cannot be right (the service refuses it), else a
+    note that goes with the answer."""
+
+    name: str
+    error: bool
+    message: str
+
+
+def scene_findings(cameras: list[Camera], depths: list[np.ndarray]) -> list[Finding]:
+    """What is wrong with one frame's views, from what they carry: each depth image's range (millimetres?), the
+    cameras' spacing (translations in millimetres?), two views with one and the same camera, and whether the
+    views' depth points agree under the rig (swapped images, a camera that moved)."""
+    out = []
+    for i, d in enumerate(depths):
+        valid = d[d > 0]
+        if valid.size:
+            median = float(np.median(valid))
+            if not 300 <= median <= 15_000:
+                out.append(Finding("depth_range", True, (
+                    f"depth_{i}'s valid pixels have a median of {median:.0f} mm; an OR camera sees 0.3-15 m: check "
+                    "the unit (depth_scale_mm: 1000 for metres, 10 for centimetres, 0.1 for 0.1 mm units)")))  # fmt: skip
+    if len(cameras) < 2:
+        return out
+    for i, j in itertools.combinations(range(len(cameras)), 2):
+        a, b = cameras[i], cameras[j]
+        if torch.allclose(a.extrinsics, b.extrinsics, atol=1e-6) and torch.allclose(a.intrinsics, b.intrinsics):
+            out.append(Finding("identical_cameras", True, (
+                f"views[{j}].camera is identical to views[{i}].camera: each view needs its own camera's "
+                "calibration (a copied block?)")))  # fmt: skip
+    if any(f.name == "identical_cameras" for f in out):
+        return out
+    spacing = camera_spacing(cameras)
+    lo, hi = PLAUSIBLE_SPACING_MM
+    if spacing is not None and not lo <= spacing <= hi:
+        out.append(Finding("translation_units", True, (
+            f"the cameras are a median {spacing:.1f} mm apart; a rig spans {lo:.0f}-{hi:.0f} mm: the extrinsics' "
+            "translations must be in millimetres (metres need x 1000)")))  # fmt: skip
+        return out
+    if any(f.error for f in out):
+        return out
+    rig = Rig(list(cameras), [str(v) for v in range(len(cameras))])
+    pairs = {r["pair"]: r for r in depth_agreement(rig, depths, SCENE_STRIDE)}
+    for (i, j), r in pairs.items():
+        back = pairs.get((j, i))  # absent when view j has no valid depth pixel
+        if i > j or back is None or min(r["overlap"], back["overlap"]) < OVERLAP_MIN:
+            continue
+        share = max(r["within"], back["within"])
+        if share < AGREE_SHARE_MIN:
+            out.append(Finding("views_disagree", False, (
+                f"views {i} and {j} disagree: where both see the same surfaces, only {share:.0%} of their depth "
+                f"points lie within {AGREE_MM:.0f} mm of each other (a calibrated rig agrees on about a quarter to a "
+                "half): a camera may have moved since its calibration, or two views' images or cameras are swapped")))  # fmt: skip
+    return out

@@ -1,7 +1,7 @@
 """A camera rig and its ``rig.json``: the per-view ``camera`` objects that ``POST /scenes`` takes.
 
-``rig.json`` is a JSON list with one object per camera, in view order, each with exactly the fields of the
-service's camera schema (``service/schemas.py: CameraIn``)::
+``rig.json`` is a JSON list with one object per camera, in view order, each with exactly the fields of
+:class:`CameraIn`, the camera schema that ``POST /scenes`` validates too::
 
     [{"fx": 538.6, "fy": 538.2, "cx": 315.8, "cy": 241.9, "distortion": null,
       "extrinsics": [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "image_size": [640, 480]}, ...]
@@ -18,12 +18,75 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated
 
+import pydantic
 import torch
+from pydantic import BaseModel, ConfigDict, Field
 
 from posenet.cameras import Camera, is_rigid, rigid_inverse
 
-CAMERA_FIELDS = ("fx", "fy", "cx", "cy", "distortion", "extrinsics", "image_size")
+# Every number is bounded to what is physically meaningful, so that nothing a client sends can overflow the
+# arithmetic downstream. Fixed-length lists, not tuples: FastAPI writes tuples as OpenAPI 3.0 `items` arrays.
+MAX_PIXELS_COORD = 1e5  # pixel coordinates and focal lengths: no camera has 100 000 pixels across
+MAX_TRANSLATION_MM = 1e5  # 100 m: far beyond any operating room
+MAX_DISTORTION = 100.0  # |OpenCV coefficient|; real calibrations stay within about 20 (MVOR's largest: 13.3)
+Size = Annotated[list[Annotated[int, Field(ge=1, le=65535)]], Field(min_length=2, max_length=2)]
+Distortion = Annotated[
+    list[Annotated[float, Field(ge=-MAX_DISTORTION, le=MAX_DISTORTION)]], Field(min_length=5, max_length=5)
+]
+# Rotation entries lie in [-1, 1] (the rigidity check), translations within MAX_TRANSLATION_MM.
+MatrixEntry = Annotated[float, Field(ge=-MAX_TRANSLATION_MM, le=MAX_TRANSLATION_MM)]
+Matrix4 = Annotated[
+    list[Annotated[list[MatrixEntry], Field(min_length=4, max_length=4)]], Field(min_length=4, max_length=4)
+]
+
+
+class CameraIn(BaseModel):
+    """One view's calibration (MVOR's ``cameras_info.camParams`` for that camera, in these names)."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+    fx: float = Field(
+        ..., ge=1, le=MAX_PIXELS_COORD, description="focal length along x, pixels (MVOR: focallength[0])"
+    )
+    fy: float = Field(
+        ..., ge=1, le=MAX_PIXELS_COORD, description="focal length along y, pixels (MVOR: focallength[1])"
+    )
+    cx: float = Field(
+        ...,
+        ge=0,
+        le=MAX_PIXELS_COORD,
+        description="principal point x, pixels (MVOR: principalpoint[0]); inside the image",
+    )
+    cy: float = Field(
+        ...,
+        ge=0,
+        le=MAX_PIXELS_COORD,
+        description="principal point y, pixels (MVOR: principalpoint[1]); inside the image",
+    )
+    distortion: Distortion | None = Field(
+        None,
+        description="OpenCV order (k1, k2, p1, p2, k3), each within +-100, or null for an ideal pinhole. "
+        "MVOR stores "
+        "(k1, k2, k3, p1, p2) and its own 3D annotations ignore distortion: send null for MVOR.",
+    )
+    extrinsics: Matrix4 = Field(
+        ...,
+        description="4x4 rigid transform T(view->reference), row-major, translation in mm: p_ref = R "
+        "p_view + t, each entry within +-1e5 (translations up to 100 m). "
+        "The reference frame is the one these transforms map into; with MVOR's calibration "
+        "(cameras_info.camParams.extrinsics[v] reshaped to 4x4) it is camera 0's, whose T is the identity.",
+    )
+    image_size: Size | None = Field(
+        None,
+        description="(width, height) in pixels the intrinsics were calibrated for; if given, the "
+        "images "
+        "sent must have exactly this size (MVOR: imagesize)",
+    )
+
+
+CAMERA_FIELDS = tuple(CameraIn.model_fields)
 
 
 @dataclass
@@ -102,27 +165,24 @@ def camera_json(camera: Camera) -> dict:
 
 
 def camera_from_json(entry: dict, where: str = "camera") -> Camera:
-    """A camera from one ``rig.json`` / ``CameraIn`` object; ValueError naming ``where`` and the problem."""
-    if not isinstance(entry, dict):
-        raise ValueError(
-            f"{where}: expected a JSON object with {list(CAMERA_FIELDS)}, got {type(entry).__name__}"
+    """A camera from one ``rig.json`` / request ``camera`` object (:class:`CameraIn`); ValueError naming
+    ``where`` and each problem."""
+    try:
+        cam = CameraIn.model_validate(entry)
+    except pydantic.ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join([where, *(str(p) for p in e['loc'])])}: {e['msg']}" for e in exc.errors()[:5]
         )
-    unknown = sorted(set(entry) - set(CAMERA_FIELDS))
-    missing = [k for k in ("fx", "fy", "cx", "cy", "extrinsics") if k not in entry]
-    if unknown or missing:
-        raise ValueError(
-            f"{where}: unknown fields {unknown}, missing fields {missing}; allowed: {list(CAMERA_FIELDS)}"
-        )
-    T = torch.tensor(entry["extrinsics"], dtype=torch.float64)
-    if T.shape != (4, 4):
-        raise ValueError(
-            f"{where}.extrinsics must be 4x4 (row-major nested lists), got shape {tuple(T.shape)}"
-        )
-    size = entry.get("image_size")
-    return Camera.create(
-        entry["fx"], entry["fy"], entry["cx"], entry["cy"], T, entry.get("distortion"),
-        None if size is None else (int(size[0]), int(size[1])),
-    )  # fmt: skip
+        raise ValueError(f"{problems} (fields: {list(CAMERA_FIELDS)})") from None
+    return camera_of(cam)
+
+
+def camera_of(cam: CameraIn, size: tuple[int, int] | None = None) -> Camera:
+    """The :class:`Camera` of a validated camera object; ``size`` (W, H) stands in for its ``image_size``."""
+    if size is None and cam.image_size is not None:
+        size = (int(cam.image_size[0]), int(cam.image_size[1]))
+    T = torch.tensor(cam.extrinsics, dtype=torch.float64)
+    return Camera.create(cam.fx, cam.fy, cam.cx, cam.cy, T, cam.distortion, size)
 
 
 def write_rig_json(rig: Rig, path: str | Path) -> None:

@@ -84,6 +84,8 @@ def crowd(scene, files, persons, views=3, ids=True, source=(0, 1, 2, 0)):
     out_views, out_files = [], []
     for v in range(views):
         view = json.loads(json.dumps(scene["views"][source[v]]))
+        if source[v] in source[:v]:  # a copy of a camera moves 200 mm per view: no two views share a camera
+            view["camera"]["extrinsics"][0][3] += 200.0 * v
         view["boxes"] = boxes
         view.pop("person_ids", None)
         if ids:
@@ -215,6 +217,16 @@ def bad_requests(tiny):
         s["views"][1].update(fields)
         return s
 
+    def depth_of(name):
+        return cv2.imdecode(np.frombuffer(parts[name][1], np.uint8), cv2.IMREAD_UNCHANGED)
+
+    def in_metres():
+        s = json.loads(json.dumps(scene))
+        for view in s["views"]:
+            for row in view["camera"]["extrinsics"][:3]:
+                row[3] /= 1000
+        return s
+
     def raw(content_type=None, cut=False):
         """The frame's form as bytes, with another Content-Type or without its closing boundary."""
         boundary = "orpose-test-boundary"  # fixed, so that the messages in docs/service.md are too
@@ -291,7 +303,15 @@ def bad_requests(tiny):
          422, "3 channels"),
         ("empty depth file", form(f=with_parts(depth_0=("d.png", b""))), 422, "depth_0 is empty"),
         ("image over ORPOSE_MAX_IMAGE_PIXELS", form(f=with_parts(depth_0=("d.png", huge))), 413,
-         "more than the limit"),
+         "ORPOSE_MAX_IMAGE_PIXELS"),
+        # issue 49: wrong units and copied cameras, which used to be answered with a 200 tens of cm off
+        ("depth in metres", form(f=with_parts(depth_1=("d.png", _png(depth_of("depth_1") // 1000)))), 422,
+         "depth_range"),
+        ("one view's depth in 0.1 mm", form(with_view(depth_scale_mm=10)), 422, "depth_range"),
+        ("translations in metres", form(in_metres()), 422, "translation_units"),
+        ("a view with another view's camera", form(with_camera(**scene["views"][0]["camera"])), 422,
+         "identical_cameras"),
+        ("3x4 extrinsics", form(with_camera(extrinsics=eye[:3])), 422, "[0, 0, 0, 1]"),
         ("unknown scene field", form({**scene, "colour": 1}), 422, "Extra inputs are not permitted"),
         ("up [0, 0, 0]", form({**scene, "up": [0, 0, 0]}), 422, "has no direction"),
     ]  # fmt: skip
@@ -467,3 +487,23 @@ def test_client_disconnect_mid_body_is_harmless(server, tiny):
     server.server_log.seek(0)
     log = server.server_log.read()
     assert "Traceback" not in log and "Exception" not in log, log[-3000:]
+
+
+def test_swapped_views_are_answered_with_a_note(server):
+    """Two views' images swapped (their cameras kept): each answer may still look fine, so it is not refused, but
+    the views' depth no longer agrees under the rig and a named note says so (posenet.rig.check.scene_findings).
+    The example frame is a rendered MVOR-twin frame, whose views agree as a calibrated rig's do."""
+    frame_dir = REPO_ROOT / "examples" / "frame"
+    scene = (frame_dir / "scene.json").read_text()
+
+    def files(order):
+        return [(f"{k}_{i}", (f"{k}_{i}.{ext}", (frame_dir / f"{k}_{v}.{ext}").read_bytes()))
+                for i, v in enumerate(order) for k, ext in (("color", "jpg"), ("depth", "png"))]  # fmt: skip
+
+    def notes(order):
+        r = server.post("/scenes", data={"scene": scene}, files=files(order))
+        assert r.status_code == 200, r.text
+        return [n for n in r.json()["notes"] if n.startswith("views_disagree")]
+
+    assert notes([0, 1, 2]) == []
+    assert any(n.startswith("views_disagree: views 1 and 2") for n in notes([0, 2, 1]))

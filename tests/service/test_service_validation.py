@@ -82,7 +82,7 @@ def test_depth_scale_converts_to_mm_and_drops_overflow():
         (png(np.zeros((4, 4), np.uint8)), 422, "8-bit"),
         (png(np.zeros((4, 4, 3), np.uint16)), 422, "3 channels"),
         (jpeg(np.zeros((4, 4), np.uint8)), 415, "JPEG"),
-        (png(np.zeros((100, 100), np.uint16)), 413, "more than the limit"),
+        (png(np.zeros((100, 100), np.uint16)), 413, "ORPOSE_MAX_IMAGE_PIXELS"),
     ],
 )
 def test_bad_depth_images_are_named(data, status, words):
@@ -103,7 +103,10 @@ def test_size_limit_is_checked_before_decoding():
 
 # ----------------------------------------------------------------------------------------------- validation
 def test_valid_scene_gives_views_and_boxes():
-    views = [{"camera": camera()}, {"camera": camera(), "boxes": [[1, 2, 30, 40]], "person_ids": [7]}]
+    beside = np.eye(4)
+    beside[0, 3] = 500.0  # a second camera half a metre along x: two views never share one camera
+    views = [{"camera": camera()}, {"camera": camera(extrinsics=beside.tolist()), "boxes": [[1, 2, 30, 40]],
+                                    "person_ids": [7]}]  # fmt: skip
     views[0]["boxes"], views[0]["person_ids"] = [], []
     scene = validate(views, parts(2))
     assert len(scene.views) == 2 and scene.views[1].depth.dtype == np.uint16
