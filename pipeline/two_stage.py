@@ -200,6 +200,7 @@ class ScenePipeline:
         self.config = config or PipelineConfig()
         # The detector checkpoint's config.json: /model reports what the detector was trained on from it.
         self.detector_meta = detector_meta or {}
+        self.load_seconds: dict[str, float] = {}  # per network, when from_checkpoints loaded it
 
     @property
     def read_size(self) -> tuple[int, int] | None:
@@ -243,7 +244,9 @@ class ScenePipeline:
         """
         from posenet.net.infer import PoseEstimator
 
+        t0 = time.perf_counter()
         pose = PoseEstimator.from_checkpoint(pose_checkpoint, device, precision, backend, threads, flip_test)
+        seconds = {"pose": time.perf_counter() - t0}
         if load_detector is None:
             from detector.infer import DEFAULT_WEIGHTS
 
@@ -255,13 +258,19 @@ class ScenePipeline:
                     DEFAULT_WEIGHTS,
                 )
         if not load_detector:
-            return cls(pose, None, config)
+            pipeline = cls(pose, None, config)
+            pipeline.load_seconds = seconds
+            return pipeline
         # Imported only when needed: transformers takes seconds to import.
         from detector.checkpoint import read_config
         from detector.infer import DEFAULT_WEIGHTS, PersonDetector
 
+        t0 = time.perf_counter()
         detector = PersonDetector.from_checkpoint(detector_checkpoint, device, precision, backend, threads)
-        return cls(pose, detector, config, read_config(detector_checkpoint or DEFAULT_WEIGHTS))
+        seconds["detector"] = time.perf_counter() - t0
+        pipeline = cls(pose, detector, config, read_config(detector_checkpoint or DEFAULT_WEIGHTS))
+        pipeline.load_seconds = seconds
+        return pipeline
 
     # ----------------------------------------------------------------------------------------- stages
     def _combination_bound(self, boxes: list[np.ndarray], views: list[SceneView]) -> float:

@@ -8,8 +8,6 @@ into ``app.state.pipeline``, unless a ready pipeline is passed in (tests, offlin
 
 from __future__ import annotations
 
-import logging
-import time
 from contextlib import asynccontextmanager
 
 import anyio
@@ -41,43 +39,20 @@ def pipeline_config(settings: Settings) -> PipelineConfig:
 
 
 def load_pipeline(settings: Settings) -> tuple[ScenePipeline, dict[str, float]]:
-    """Both models from ``settings``' checkpoints (``ScenePipeline.from_checkpoints``), one after the other, and
-    the seconds each took to load (``orpose_model_load_seconds``)."""
-    t0 = time.perf_counter()
+    """Both models from ``settings``' checkpoints (``ScenePipeline.from_checkpoints``) and the seconds each took
+    to load (``orpose_model_load_seconds``)."""
     pipeline = ScenePipeline.from_checkpoints(
         settings.pose_checkpoint,
-        None,
+        settings.detector_checkpoint,
         settings.device,
-        False,
+        settings.load_detector,
         pipeline_config(settings),
         settings.precision,
         settings.backend,
         settings.threads,
         settings.flip_test,
     )
-    seconds = {"pose": time.perf_counter() - t0}
-    load_detector = settings.load_detector
-    if load_detector is False:
-        return pipeline, seconds
-    # Imported only when needed: transformers takes seconds to import.
-    from detector.checkpoint import read_config
-    from detector.infer import DEFAULT_WEIGHTS, PersonDetector
-
-    checkpoint = settings.detector_checkpoint
-    if load_detector is None and checkpoint is None and not DEFAULT_WEIGHTS.is_file():
-        logging.getLogger(__name__).warning(
-            "no detector weights at %s and ORPOSE_DETECTOR_CHECKPOINT unset: serving reference-box mode only "
-            "(requests must carry boxes)",
-            DEFAULT_WEIGHTS,
-        )
-        return pipeline, seconds
-    t0 = time.perf_counter()
-    detector = PersonDetector.from_checkpoint(
-        checkpoint, settings.device, settings.precision, settings.backend, settings.threads
-    )
-    seconds["detector"] = time.perf_counter() - t0
-    meta = read_config(checkpoint or DEFAULT_WEIGHTS)
-    return ScenePipeline(pipeline.pose, detector, pipeline.config, meta), seconds
+    return pipeline, pipeline.load_seconds
 
 
 @asynccontextmanager
