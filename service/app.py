@@ -13,17 +13,16 @@ from contextlib import asynccontextmanager
 import anyio
 import torch
 from fastapi import FastAPI, Request
-from fastapi.openapi.utils import get_openapi
 from fastapi.responses import JSONResponse
 
 from pipeline.skeleton_matching import SkeletonMatchConfig
 from pipeline.track import Tracker, TrackerConfig
 from pipeline.two_stage import PipelineConfig, ScenePipeline
+from service import openapi
 from service.errors import InputError
 from service.limits import BodyLimitMiddleware, InFlightLimiter
 from service.metrics import Metrics, RequestCounter
 from service.routes import docs_router, metrics_router, protected, public
-from service.schemas import SceneIn
 from service.settings import Settings
 from service.streams import StreamRegistry
 
@@ -75,16 +74,9 @@ async def _input_error(request: Request, exc: InputError) -> JSONResponse:
 
 
 def _openapi(app: FastAPI) -> dict:
-    """FastAPI's schema plus the models of the multipart ``scene`` part, which no route parameter declares."""
+    """The app's schema (``service.openapi.build``), built once."""
     if app.openapi_schema is None:
-        schema = get_openapi(
-            title=app.title, version=app.version, description=app.description, routes=app.routes
-        )
-        scene = SceneIn.model_json_schema(ref_template="#/components/schemas/{model}")
-        components = schema.setdefault("components", {}).setdefault("schemas", {})
-        components.update(scene.pop("$defs", {}))
-        components["SceneIn"] = scene
-        app.openapi_schema = schema
+        app.openapi_schema = openapi.build(app, app.state.settings)
     return app.openapi_schema
 
 

@@ -9,15 +9,10 @@ from contextlib import asynccontextmanager
 from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request
-from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from pipeline.two_stage import ScenePipeline
 from service.settings import Settings
 from service.streams import StreamRegistry
-
-_bearer = HTTPBearer(
-    auto_error=False, description="Required on every route but /health when the server sets ORPOSE_TOKEN"
-)
 
 
 def get_settings(request: Request) -> Settings:
@@ -27,15 +22,17 @@ def get_settings(request: Request) -> Settings:
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 
 
-def require_token(
-    settings: SettingsDep, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
-) -> None:
-    """401 unless the request carries ``Authorization: Bearer <ORPOSE_TOKEN>`` (when a token is
-    configured)."""
+def require_token(request: Request) -> None:
+    """401 unless the request carries ``Authorization: Bearer <ORPOSE_TOKEN>`` (when a token is configured).
+
+    It reads the header itself rather than declaring it as a parameter: the OpenAPI schema then names the
+    header only through the bearer security scheme, and only when a token is set (``service.openapi``)."""
+    settings: Settings = request.app.state.settings
     if settings.token is None:
         return
     expected = settings.token.get_secret_value().encode()
-    given = b"" if credentials is None else credentials.credentials.encode()
+    scheme, _, credentials = request.headers.get("authorization", "").strip().partition(" ")
+    given = credentials.strip().encode() if scheme.lower() == "bearer" else b""
     if not secrets.compare_digest(given, expected):  # constant time: the token cannot be guessed byte by byte
         raise HTTPException(401, "missing or wrong bearer token", headers={"WWW-Authenticate": "Bearer"})
 

@@ -29,67 +29,53 @@ from service.deps import PipelineDep, SettingsDep, StreamsDep, inference_slot, r
 from service.errors import PAYLOAD_TOO_LARGE, UNSUPPORTED_MEDIA, InputError
 from service.metrics import SCENES, STREAM_FRAMES, Metrics
 from service.model_info import model_info
+from service.openapi import MAX_TEXT_PARTS, RETRY_AFTER, SCENE_FORM, max_file_parts
+from service.openapi import MULTIPART as _MULTIPART
 from service.response import encode
 from service.schemas import Error, Health, ModelInfo, Ready, SceneOut, StreamEnded, StreamFrameOut
 from service.settings import Settings
-from service.streams import MAX_TIMESTAMP_S, Frame, StreamRegistry, check_stream_id, parse_timestamp
+from service.streams import STREAM_ID, Frame, StreamRegistry, check_stream_id, parse_timestamp
 from service.validation import Limits, ValidatedScene, parse_scene, validate_scene
 
 public = APIRouter()
-_UNAUTHORIZED = {
-    401: {"model": Error, "description": "missing or wrong bearer token (when ORPOSE_TOKEN is set)"}
+# The 401 of a protected operation, and its security requirement, are added by service.openapi when a token is set.
+protected = APIRouter(dependencies=[Depends(require_token)])
+_NOT_LOADED = {
+    "model": Error,
+    "description": "the models are not loaded yet (see Retry-After)",
+    "headers": RETRY_AFTER,
 }
-protected = APIRouter(dependencies=[Depends(require_token)], responses=_UNAUTHORIZED)
 
 _ERRORS = {
-    400: {"model": Error, "description": "malformed multipart body"},
-    401: {"model": Error, "description": "missing or wrong bearer token (only when ORPOSE_TOKEN is set)"},
-    408: {"model": Error, "description": "the body did not arrive in time"},
-    413: {"model": Error, "description": "the body or an image is beyond the server's limits"},
-    415: {"model": Error, "description": "not multipart/form-data, or an image that is neither PNG nor JPEG"},
-    422: {"model": Error, "description": "the scene is wrong; the message names the part and the problem"},
+    400: {
+        "model": Error,
+        "description": "malformed multipart body (no boundary, cut short, a part without a name), a body that "
+        "is not a form at all, or a client that left before the answer",
+    },
+    408: {"model": Error, "description": "the body did not arrive within ORPOSE_BODY_TIMEOUT_S"},
+    413: {
+        "model": Error,
+        "description": "the body (ORPOSE_MAX_BODY_BYTES) or an image (ORPOSE_MAX_IMAGE_PIXELS) is beyond the "
+        "server's limits",
+    },
+    415: {
+        "model": Error,
+        "description": "not multipart/form-data, or an image part that is neither PNG nor JPEG",
+    },
+    422: {
+        "model": Error,
+        "description": "the scene is wrong in a way the schema cannot say (images that do not decode, 8-bit "
+        "depth, colour and depth of different sizes, a principal point outside the image, extrinsics that are "
+        "not rigid, parts of views the scene does not have, depth that cannot be right); the message names "
+        "the part and the problem",
+    },
     503: {
         "model": Error,
-        "description": "too many requests in flight (see Retry-After), or models not loaded",
+        "description": "too many uploads arriving (ORPOSE_MAX_RECEIVING) or requests in flight "
+        "(ORPOSE_MAX_IN_FLIGHT), or the models not loaded yet; see Retry-After",
+        "headers": RETRY_AFTER,
     },
 }
-
-_MULTIPART = "multipart/form-data"
-_SCENE_FORM = {
-    "type": "object",
-    "required": ["scene", "depth_0"],
-    "properties": {
-        "scene": {
-            "$ref": "#/components/schemas/SceneIn",
-            "description": "the scene as JSON: per view the camera, depth_scale_mm, and optional reference "
-            "boxes / person_ids",
-        },
-        **{
-            f"{kind}_{i}": {
-                "type": "string",
-                "format": "binary",
-                "description": f"view {i}'s "
-                + (
-                    "colour image, PNG or JPEG, 8-bit"
-                    if kind == "color"
-                    else "depth, 16-bit PNG (mm x scale)"
-                ),
-            }
-            for i in range(3)
-            for kind in ("color", "depth")
-        },
-    },
-    "patternProperties": {
-        "^(color|depth)_[0-9]+$": {
-            "type": "string",
-            "format": "binary",
-            "description": "color_<i> / depth_<i> for views beyond the third",
-        }
-    },
-    "additionalProperties": False,
-}
-# The scene part is JSON (its schema is SceneIn); the images are binary file parts.
-_SCENE_BODY = {"schema": _SCENE_FORM, "encoding": {"scene": {"contentType": "application/json"}}}
 
 
 def docs_router(openapi: Callable[[], dict], protect: bool) -> APIRouter:
@@ -125,14 +111,20 @@ def docs_router(openapi: Callable[[], dict], protect: bool) -> APIRouter:
 
 def metrics_router(protect: bool) -> APIRouter:
     """``GET /metrics``; behind the token if ``protect`` (a token is set and ORPOSE_METRICS_OPEN is not)."""
-    router = APIRouter(
-        dependencies=[Depends(require_token)] if protect else [], responses=_UNAUTHORIZED if protect else {}
-    )
+    router = APIRouter(dependencies=[Depends(require_token)] if protect else [])
 
     @router.get(
         "/metrics",
         response_class=Response,
-        responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}}}},
+        responses={
+            200: {
+                "description": "the Prometheus text format, or OpenMetrics when the Accept header asks for it",
+                "content": {
+                    "text/plain": {"schema": {"type": "string"}},
+                    "application/openmetrics-text": {"schema": {"type": "string"}},
+                },
+            }
+        },
         summary="Prometheus metrics: latency per stage, requests by status, rejections, queues, streams, models",
     )
     async def metrics(request: Request) -> Response:
@@ -191,7 +183,12 @@ async def ready(request: Request, response: Response) -> Ready:
     return Ready(ready=loaded)
 
 
-@protected.get("/model", response_model=ModelInfo, summary="What the loaded models read and were trained on")
+@protected.get(
+    "/model",
+    response_model=ModelInfo,
+    responses={503: _NOT_LOADED},
+    summary="What the loaded models read and were trained on",
+)
 async def model(pipeline: PipelineDep, settings: SettingsDep) -> ModelInfo:
     return model_info(pipeline, settings.device)
 
@@ -225,7 +222,7 @@ async def _read_form(
             yield chunk
 
     parser = MultiPartParser(
-        request.headers, body(), max_files=2 * settings.max_views + 1, max_fields=4,
+        request.headers, body(), max_files=max_file_parts(settings), max_fields=MAX_TEXT_PARTS,
         max_part_size=settings.max_body_bytes,
     )  # fmt: skip
     parser.spool_max_size = settings.max_body_bytes  # the body is capped: keep every part in memory
@@ -278,7 +275,7 @@ async def _form_parts(form, fields: tuple[str, ...]) -> tuple[dict[str, bytes], 
     description="multipart/form-data with a `scene` JSON part (SceneIn) and, per view i, the file parts "
     "`color_i` (PNG/JPEG) and `depth_i` (16-bit PNG). With boxes in any view, detection is skipped "
     "(reference-box mode). Every 3D coordinate in the response is in mm in the reference frame.",
-    openapi_extra={"requestBody": {"required": True, "content": {_MULTIPART: _SCENE_BODY}}},
+    openapi_extra={SCENE_FORM: "scene"},  # the form, as service.openapi.scene_form describes it
 )
 async def post_scene(request: Request, pipeline: PipelineDep, settings: SettingsDep) -> Response:
     t_start = time.perf_counter()
@@ -359,9 +356,11 @@ async def scene_result(
 
 
 # ----------------------------------------------------------------------------------------------- streams
+# The pattern is the schema's word; check_stream_id enforces it with a message of its own (a 422 Error body).
 _STREAM_ID = Path(
     description="the stream's name, chosen by the client: 1 to 64 letters, digits, '.', '_' or '-', starting "
-    "with a letter or digit. A frame to a name the server does not hold starts a new stream"
+    "with a letter or digit. A frame to a name the server does not hold starts a new stream",
+    json_schema_extra={"pattern": f"^{STREAM_ID.pattern}$", "minLength": 1, "maxLength": 64},
 )
 _STREAM_ERRORS = {
     **_ERRORS,
@@ -370,24 +369,15 @@ _STREAM_ERRORS = {
         "description": "the frame is not later than the stream's last frame (or mixes timestamp_s with the "
         "server's clock); the message says what was expected",
     },
-    503: {
-        "model": Error,
-        "description": "too many requests in flight or streams held (ORPOSE_MAX_STREAMS; see Retry-After), or "
-        "models not loaded",
+    422: {
+        **_ERRORS[422],
+        "description": "the stream id is not valid, or " + _ERRORS[422]["description"],
     },
-}
-_STREAM_FORM = {
-    **_SCENE_FORM,
-    "properties": {
-        **_SCENE_FORM["properties"],
-        "timestamp_s": {
-            "type": "number",
-            "minimum": 0,
-            "maximum": MAX_TIMESTAMP_S,
-            "description": "optional: the frame's time in seconds (any clock the client keeps for the whole "
-            "stream, e.g. since the recording started, or Unix time); later than the stream's last frame. "
-            "Without it the server's receive time is used (and then for every frame of the stream)",
-        },
+    503: {
+        **_ERRORS[503],
+        "description": _ERRORS[503]["description"].replace(
+            "(ORPOSE_MAX_IN_FLIGHT)", "(ORPOSE_MAX_IN_FLIGHT) or streams held (ORPOSE_MAX_STREAMS)"
+        ),
     },
 }
 
@@ -400,12 +390,7 @@ _STREAM_FORM = {
     description="The same multipart form as POST /scenes, plus an optional `timestamp_s` field. Frames of one "
     "stream are answered one at a time and must arrive in time order (else 409). Each person carries its "
     "`track_id` (stable from frame to frame) and its `smoothed_joints` beside the raw `joints`.",
-    openapi_extra={
-        "requestBody": {
-            "required": True,
-            "content": {_MULTIPART: {"schema": _STREAM_FORM, "encoding": _SCENE_BODY["encoding"]}},
-        }
-    },
+    openapi_extra={SCENE_FORM: "stream"},
 )
 async def post_stream_frame(
     stream_id: Annotated[str, _STREAM_ID],

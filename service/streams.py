@@ -8,7 +8,7 @@ adds a ``track_id`` and the smoothed joints to every person.
 - **Order.** A stream answers its frames one at a time (a per-stream lock, taken after the inference slot,
   so that waiting frames are bounded by ``ORPOSE_MAX_IN_FLIGHT``), and each frame must be later than the last
   one it took: an older or equal time is a 409 that says what was expected. A rejected frame (4xx) leaves the
-  stream as it was.
+  stream as it was; a stream whose first frame is rejected is not started.
 - **Time.** A frame's time is its form field ``timestamp_s`` (seconds, on any clock that the client keeps
   for the whole stream). A stream whose first frame has none uses the server's receive time instead, counted
   from that first frame; one stream never mixes the two (409).
@@ -223,6 +223,10 @@ class StreamRegistry:
         finally:
             stream.users -= 1
             stream.last_used = self.now()
+            if not stream.frames and not stream.users and self.streams.get(stream_id) is stream:
+                # A stream whose first frame was refused was never started: it holds no place (a client's bad
+                # requests cannot fill ORPOSE_MAX_STREAMS), and a DELETE of it is a 404.
+                del self.streams[stream_id]
 
 
 def _frame_time(stream: Stream, clock: str, timestamp_s: float | None, received: float) -> float:
