@@ -73,14 +73,21 @@ class FrameDetections:
     """The detector's boxes of one frame at the lowest score asked for, handed out at any higher score."""
 
     def __init__(self, detector, views, lowest: float):
-        self.cfg = detector.cfg
+        self.detector = detector
+        self.backend = detector.backend
         self.found = detector.detect([v.color for v in views], depths=[v.depth for v in views],
                                      score_threshold=lowest)  # fmt: skip
 
-    def detect(self, images, depths=None, score_threshold=None):
-        from detector.infer import Detections
+    # the rest of detector.protocol.Detector, as the real detector answers it
+    score_threshold = property(lambda self: self.detector.score_threshold)
+    input_width = property(lambda self: self.detector.input_width)
+    needs_depth = property(lambda self: self.detector.needs_depth)
+    precision = property(lambda self: self.detector.precision)
 
-        keep = self.cfg.score_threshold if score_threshold is None else score_threshold
+    def detect(self, images, depths=None, score_threshold=None):
+        from detector.protocol import Detections
+
+        keep = self.score_threshold if score_threshold is None else score_threshold
         return [Detections(d.boxes[d.scores >= keep], d.scores[d.scores >= keep]) for d in self.found]
 
 

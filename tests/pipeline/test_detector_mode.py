@@ -21,7 +21,7 @@ from posenet.net.model import ModelConfig, PoseNet
 from posenet.scene import views_of
 
 sys.path.insert(0, str(Path(__file__).parents[2] / "benchmarks"))
-from detector_mode import single_view_errors, worst_poses  # noqa: E402
+from detector_mode import FrameDetections, single_view_errors, worst_poses  # noqa: E402
 
 
 def test_single_view_errors_equal_the_fused_error_of_persons_boxed_once(tmp_path):
@@ -83,3 +83,26 @@ def test_worst_poses_finds_the_poses_moved_and_their_share_of_the_excess(tmp_pat
     for s, w in found.items():
         if all(str(support[i]) != s for i in moved):
             assert w["excess_cm"] == 0.0
+
+
+def test_frame_detections_stand_in_for_the_detector_they_wrap():
+    """The benchmark hands the pipeline one frame's boxes at any score: it is a detector.protocol.Detector, as the
+    pipeline requires, and answers the wrapped detector's threshold."""
+    from detector.protocol import Detections, Detector
+    from posenet.runtime.execution import Precision
+    from posenet.runtime.graphs import Backend
+
+    class Fixed:
+        score_threshold, input_width, needs_depth = 0.5, 160, True
+        precision, backend = Precision("fp32", "test"), Backend("torch", "test")
+
+        def detect(self, images, depths=None, score_threshold=None):
+            scores = np.array([0.9, 0.6, 0.3], np.float32)
+            keep = scores >= score_threshold
+            return [Detections(np.zeros((3, 4), np.float32)[keep], scores[keep]) for _ in images]
+
+    frame = FrameDetections(Fixed(), [dataclasses.make_dataclass("V", ["color", "depth"])(None, None)], 0.25)
+    assert isinstance(frame, Detector) and frame.score_threshold == 0.5
+    assert [len(d.scores) for d in frame.detect([None])] == [2]  # at the wrapped threshold
+    assert [len(d.scores) for d in frame.detect([None], score_threshold=0.25)] == [3]
+    ScenePipeline(object(), frame)  # accepted where a detector goes
