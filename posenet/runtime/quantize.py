@@ -4,7 +4,7 @@ On a CPU without native bf16 (AVX2-only: AMD Zen 2/3, older Xeons) float32 is th
 convolutions are ~90 % of both networks' time. OpenVINO runs int8 convolutions about 1.7-1.8x faster than float32
 there, and 3.6-4x on a CPU with AMX (``benchmarks/RESULTS.md``), at a cost in accuracy that
 ``benchmarks/backend_accuracy.py`` measures (day 4, reference boxes, against bf16: +0.05 cm MPJPE on the twin,
-+0.09 cm on the unseen alt look; detector AP50 -0.003 / -0.002). ``--precision int8`` / ``ORPOSE_PRECISION=int8`` asks for it; it is
++0.09 cm on the unseen alt look; detector AP50 unchanged / -0.001). ``--precision int8`` / ``ORPOSE_PRECISION=int8`` asks for it; it is
 never chosen by ``auto``, since it trades accuracy, however little, for speed.
 
 Post-training quantization needs inputs to measure each layer's range: **calibration scenes** that the package's
