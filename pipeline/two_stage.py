@@ -257,18 +257,17 @@ class ScenePipeline:
                     "only (requests must carry boxes)",
                     DEFAULT_WEIGHTS,
                 )
-        if not load_detector:
-            pipeline = cls(pose, None, config)
-            pipeline.load_seconds = seconds
-            return pipeline
-        # Imported only when needed: transformers takes seconds to import.
-        from detector.checkpoint import read_config
-        from detector.infer import DEFAULT_WEIGHTS, PersonDetector
+        detector, meta = None, None
+        if load_detector:
+            # Imported only when needed: transformers takes seconds to import.
+            from detector.checkpoint import read_config
+            from detector.infer import DEFAULT_WEIGHTS, PersonDetector
 
-        t0 = time.perf_counter()
-        detector = PersonDetector.from_checkpoint(detector_checkpoint, device, precision, backend, threads)
-        seconds["detector"] = time.perf_counter() - t0
-        pipeline = cls(pose, detector, config, read_config(detector_checkpoint or DEFAULT_WEIGHTS))
+            t0 = time.perf_counter()
+            detector = PersonDetector.from_checkpoint(detector_checkpoint, device, precision, backend, threads)
+            seconds["detector"] = time.perf_counter() - t0
+            meta = read_config(detector_checkpoint or DEFAULT_WEIGHTS)
+        pipeline = cls(pose, detector, config, meta)
         pipeline.load_seconds = seconds
         return pipeline
 

@@ -37,10 +37,10 @@ def pipeline_config(settings: Settings) -> PipelineConfig:
     )
 
 
-def load_pipeline(settings: Settings) -> tuple[ScenePipeline, dict[str, float]]:
-    """Both models from ``settings``' checkpoints (``ScenePipeline.from_checkpoints``) and the seconds each took
-    to load (``orpose_model_load_seconds``)."""
-    pipeline = ScenePipeline.from_checkpoints(
+def load_pipeline(settings: Settings) -> ScenePipeline:
+    """Both models from ``settings``' checkpoints (``ScenePipeline.from_checkpoints``; it records the seconds
+    each took to load, ``orpose_model_load_seconds``)."""
+    return ScenePipeline.from_checkpoints(
         settings.pose_checkpoint,
         settings.detector_checkpoint,
         settings.device,
@@ -51,7 +51,6 @@ def load_pipeline(settings: Settings) -> tuple[ScenePipeline, dict[str, float]]:
         settings.threads,
         settings.flip_test,
     )
-    return pipeline, pipeline.load_seconds
 
 
 @asynccontextmanager
@@ -61,10 +60,8 @@ async def lifespan(app: FastAPI):
     app.state.inference_limiter = anyio.CapacityLimiter(settings.inference_workers)
     metrics: Metrics = app.state.metrics
     if app.state.pipeline is None:
-        app.state.pipeline, seconds = await anyio.to_thread.run_sync(lambda: load_pipeline(settings))
-        metrics.models(app.state.pipeline, seconds)
-    else:
-        metrics.models(app.state.pipeline)
+        app.state.pipeline = await anyio.to_thread.run_sync(lambda: load_pipeline(settings))
+    metrics.models(app.state.pipeline)
     yield
     app.state.pipeline = None
 
@@ -160,18 +157,12 @@ def _watch(app: FastAPI, metrics: Metrics, receiving: InFlightLimiter) -> None:
 
         return read
 
-    streams: StreamRegistry = app.state.streams
-
-    def active_streams() -> float:
-        now = streams.now()
-        return sum(1 for s in streams.streams.values() if s.users or now - s.last_used <= streams.idle_s)
-
     metrics.watch(
         in_flight=lambda: app.state.in_flight.in_flight,
         waiting=inference("tasks_waiting"),
         running=inference("borrowed_tokens"),
         receiving=lambda: receiving.in_flight,
-        streams=active_streams,
+        streams=app.state.streams.active,
     )
 
 

@@ -175,13 +175,14 @@ class Metrics:
         ):
             gauge.set_function(read)
 
-    def models(self, pipeline, load_seconds: dict[str, float] | None = None) -> None:
-        """The loaded networks' runtimes (``pipeline``: a ``ScenePipeline``) and, when known, their load times."""
+    def models(self, pipeline) -> None:
+        """The loaded networks' runtimes (``pipeline``: a ``ScenePipeline``) and, when it loaded them, their load
+        times (``ScenePipeline.load_seconds``)."""
         for network, net in (("pose", pipeline.pose), ("detector", pipeline.detector)):
             if net is None:
                 continue
             self.model.labels(network).info({"backend": net.backend.name, "precision": net.precision.name})
-        for network, seconds in (load_seconds or {}).items():
+        for network, seconds in pipeline.load_seconds.items():
             self.load_seconds.labels(network).set(seconds)
 
     def exposition(self, accept: str | None) -> tuple[bytes, str]:

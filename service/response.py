@@ -50,13 +50,14 @@ def _notes(persons: list[PersonResult], scene: ValidatedScene) -> list[str]:
     ] + list(scene.notes)
     if persons:
         joints = np.stack([p.joints for p in persons])
-        flagged = implausible(joints, [len(p.support) for p in persons])
+        scales = body_scale(joints)
+        flagged = implausible(joints, [len(p.support) for p in persons], scales)
         notes += [
             f"person {p.id} is seen by one view only and its skeleton is {scale:.0%} of an adult's size: its depth "
             "is likely not the person's (the heatmaps lie on what is behind or beside them), so its confidence is "
             f"capped at {ONE_VIEW_CAP}; a second view of this person, or a box that fits them more tightly, would "
             "settle it"
-            for p, scale, bad in zip(persons, body_scale(joints), flagged, strict=True)
+            for p, scale, bad in zip(persons, scales, flagged, strict=True)
             if bad
         ]
     if scene.person_ids is not None:

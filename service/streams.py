@@ -168,10 +168,19 @@ class StreamRegistry:
         self.now = now
         self.streams: dict[str, Stream] = {}
 
+    def _idle(self, stream: Stream, now: float) -> bool:
+        """Whether ``stream`` has expired: no frame in progress and none for ``idle_s``."""
+        return not stream.users and now - stream.last_used > self.idle_s
+
     def expire(self) -> None:
         now = self.now()
-        for sid in [s.id for s in self.streams.values() if not s.users and now - s.last_used > self.idle_s]:
+        for sid in [s.id for s in self.streams.values() if self._idle(s, now)]:
             del self.streams[sid]
+
+    def active(self) -> int:
+        """The streams held that have not expired (those ``expire`` would keep)."""
+        now = self.now()
+        return sum(1 for s in self.streams.values() if not self._idle(s, now))
 
     def open(self, stream_id: str) -> Stream:
         """The stream ``stream_id``, started if it does not exist; 503 when the registry is full."""

@@ -36,7 +36,8 @@ def body_scale(joints) -> np.ndarray:
     return (lengths / ref).median(dim=-1).values.numpy()
 
 
-def implausible(joints, support) -> np.ndarray:
+def implausible(joints, support, scale: np.ndarray | None = None) -> np.ndarray:
     """(...) bool: persons seen by one view (``support (...)``) whose skeleton ``joints (..., J, 3)`` is less than
-    ``MIN_ONE_VIEW_SCALE`` of an adult's size."""
-    return (np.asarray(support) == 1) & (body_scale(joints) < MIN_ONE_VIEW_SCALE)
+    ``MIN_ONE_VIEW_SCALE`` of an adult's size (``scale``: their :func:`body_scale`, when already known)."""
+    scale = body_scale(joints) if scale is None else scale
+    return (np.asarray(support) == 1) & (scale < MIN_ONE_VIEW_SCALE)

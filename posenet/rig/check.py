@@ -97,16 +97,28 @@ def sanity_checks(rig: Rig) -> list[tuple[str, str]]:
     return out
 
 
+DEPTH_RANGE_MM = (300.0, 15_000.0)  # the median valid depth of an OR camera's frame, in millimetres
+
+
+def median_depth(depth: np.ndarray) -> tuple[float | None, bool]:
+    """The median of a uint16 depth frame's valid (non-zero) pixels, or None without any; and whether it lies in
+    ``DEPTH_RANGE_MM`` (a frame in mm, not in metres, centimetres or 0.1 mm)."""
+    valid = depth[depth > 0]
+    if not valid.size:
+        return None, False
+    median = float(np.median(valid))
+    return median, DEPTH_RANGE_MM[0] <= median <= DEPTH_RANGE_MM[1]
+
+
 def depth_checks(depths: list[np.ndarray]) -> list[tuple[str, str]]:
     """Whether each uint16 depth frame looks like millimetres: its median valid depth is 0.3 to 15 m."""
     out = []
     for i, d in enumerate(depths):
-        valid = d[d > 0]
-        if not valid.size:
+        median, ok = median_depth(d)
+        if median is None:
             out.append(("FAIL", f"depth frame {i}: no valid (non-zero) pixel"))
             continue
-        median = float(np.median(valid))
-        ok = 300 <= median <= 15_000
+        valid = d[d > 0]
         hint = "" if ok else " (are the units mm? 0.1 mm or cm units would read 10x too far or too near)"
         out.append(
             (
@@ -254,11 +266,9 @@ def scene_findings(cameras: list[Camera], depths: list[np.ndarray]) -> list[Find
     views' depth points agree under the rig (swapped images, a camera that moved)."""
     out = []
     for i, d in enumerate(depths):
-        valid = d[d > 0]
-        if valid.size:
-            median = float(np.median(valid))
-            if not 300 <= median <= 15_000:
-                out.append(Finding("depth_range", True, (
+        median, ok = median_depth(d)
+        if median is not None and not ok:
+            out.append(Finding("depth_range", True, (
                     f"depth_{i}'s valid pixels have a median of {median:.0f} mm; an OR camera sees 0.3-15 m: check "
                     "the unit (depth_scale_mm: 1000 for metres, 10 for centimetres, 0.1 for 0.1 mm units)")))  # fmt: skip
     if len(cameras) < 2:
