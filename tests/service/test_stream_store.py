@@ -6,10 +6,10 @@ import asyncio
 
 import numpy as np
 import pytest
+from redis_harness import redis_server
 
 from pipeline.track import Tracker
 from service.stream_store import RedisStreams, StaleState
-from redis_harness import redis_server
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,9 @@ def test_a_tracker_goes_through_redis_and_tracks_on_as_the_one_that_stayed(redis
 
     version, state, kept = run(go())
     assert version == 0 and state["frames"] == 10
-    joints = np.random.default_rng(0).normal(0, 1000, (3, 1, 3)) + np.random.default_rng(0).normal(0, 200, (3, 10, 3))
+    joints = np.random.default_rng(0).normal(0, 1000, (3, 1, 3)) + np.random.default_rng(0).normal(
+        0, 200, (3, 10, 3)
+    )
     a = state["tracker"].update(joints + 55.0, np.full((3, 10), 30.0), 11 / 15)
     b = kept.update(joints + 55.0, np.full((3, 10), 30.0), 11 / 15)
     assert [p.track_id for p in a] == [p.track_id for p in b]
