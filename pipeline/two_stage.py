@@ -130,6 +130,19 @@ def _ms(t0: float) -> float:
 
 
 @dataclass
+class Detected:
+    """The detector's work on one frame (:meth:`ScenePipeline.detect`), for :meth:`ScenePipeline.run`: per view
+    the boxes ``(K_v, 4)`` xyxy px, their scores ``(K_v,)``, which of them are unsure (``(K_v,)`` bool, or None
+    when unsure boxes are not used), and the milliseconds it took. A stream detects frame t+1 while frame t is
+    in the pose stage (``service.streams``)."""
+
+    boxes: list[np.ndarray]
+    scores: list[np.ndarray]
+    candidate: list[np.ndarray] | None
+    ms: float
+
+
+@dataclass
 class TrackerQuestions:
     """What a stream's tracker tells :meth:`ScenePipeline.run` about the persons of boxes the detector was unsure
     of, so that only those it can use are found (``pipeline.track.Tracker.unsure_targets``)."""
@@ -264,7 +277,9 @@ class ScenePipeline:
             from detector.infer import DEFAULT_WEIGHTS, PersonDetector
 
             t0 = time.perf_counter()
-            detector = PersonDetector.from_checkpoint(detector_checkpoint, device, precision, backend, threads)
+            detector = PersonDetector.from_checkpoint(
+                detector_checkpoint, device, precision, backend, threads
+            )
             seconds["detector"] = time.perf_counter() - t0
             meta = read_config(detector_checkpoint or DEFAULT_WEIGHTS)
         pipeline = cls(pose, detector, config, meta)
@@ -320,6 +335,7 @@ class ScenePipeline:
         boxes: list[np.ndarray] | None = None,
         person_ids: list[np.ndarray] | None = None,
         unsure: bool | TrackerQuestions = False,
+        detected: Detected | None = None,
     ) -> SceneResult:
         """Estimate every person's 3D pose in one frame.
 
@@ -334,6 +350,7 @@ class ScenePipeline:
                 their joints would lie in (``BoxHeatmaps.joint_bounds`` of the unsure boxes left over), where the
                 tracks are that they could continue: none, and they are not looked for; else only those within
                 reach of one are finished (the others are left out before step 7).
+            detected: the frame's :meth:`detect`, when it already ran (detector mode: ``boxes`` None).
         """
         if not views:
             raise ValueError("a scene needs at least one view")
@@ -341,11 +358,9 @@ class ScenePipeline:
         scores: list[np.ndarray | None] = [None] * len(views)
         candidate = None  # per view (K_v,) bool: detected boxes below the detector's threshold
         if boxes is None:
-            if self.detector is None:
-                raise ValueError("no detector is loaded: give reference boxes")
-            t0 = time.perf_counter()
-            boxes, scores, candidate = self._detect(views)
-            timings["detect"] = _ms(t0)
+            detected = detected or self.detect(views)
+            boxes, scores, candidate = detected.boxes, detected.scores, detected.candidate
+            timings["detect"] = detected.ms
             person_ids = None
         elif len(boxes) != len(views):
             raise ValueError(f"boxes has {len(boxes)} entries for {len(views)} views")
@@ -428,7 +443,9 @@ class ScenePipeline:
             joints = np.asarray(prediction.joints, dtype=np.float64)  # (P, J, 3)
             spread = torch.as_tensor(prediction.spread_mm, dtype=torch.float64).cpu()  # (P, J) mm
             support = torch.tensor([len(p.support) for p in persons])  # (P,)
-            confidence = self.pose.calibration(spread, support, torch.as_tensor(joints)).numpy()  # (P, J) in [0, 1]
+            confidence = self.pose.calibration(
+                spread, support, torch.as_tensor(joints)
+            ).numpy()  # (P, J) in [0, 1]
             for p, person in enumerate(persons):
                 person.joints, person.confidence = joints[p], confidence[p]
                 person.spread_mm = spread[p].numpy()
@@ -463,10 +480,18 @@ class ScenePipeline:
             candidate = [c[k] for c, k in zip(candidate, keep, strict=True)]
         return boxes, [s[k] for s, k in zip(scores, keep, strict=True)], candidate
 
-    def _detect(self, views: list[SceneView]) -> tuple[list, list, list | None]:
+    def detect(self, views: list[SceneView]) -> Detected:
         """The detector's boxes ``(K_v, 4)`` and scores ``(K_v,)`` per view, and which of them are unsure
         (``PipelineConfig.candidate_score`` up to the detector's threshold; None when unsure ones are not used;
-        ``pipeline.skeleton_matching.split_unsure``)."""
+        ``pipeline.skeleton_matching.split_unsure``): the first stage of :meth:`run` in detector mode."""
+        if self.detector is None:
+            raise ValueError("no detector is loaded: give reference boxes")
+        t0 = time.perf_counter()
+        boxes, scores, candidate = self._detect(views)
+        return Detected(boxes, scores, candidate, _ms(t0))
+
+    def _detect(self, views: list[SceneView]) -> tuple[list, list, list | None]:
+        """:meth:`detect`'s boxes, scores and unsure masks."""
         threshold = self.detector.score_threshold
         low = self.config.candidate_score
         use_low = self.config.matcher.startswith("skeletons") and low is not None and low < threshold

@@ -58,6 +58,8 @@ async def lifespan(app: FastAPI):
     settings: Settings = app.state.settings
     torch.set_num_threads(settings.threads)
     app.state.inference_limiter = anyio.CapacityLimiter(settings.inference_workers)
+    # A stream's front stage (decoding, the detector) runs here while its previous frame is in the pose stage.
+    app.state.front_limiter = anyio.CapacityLimiter(1)
     metrics: Metrics = app.state.metrics
     if app.state.pipeline is None:
         app.state.pipeline = await anyio.to_thread.run_sync(lambda: load_pipeline(settings))

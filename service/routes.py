@@ -12,18 +12,20 @@ from __future__ import annotations
 import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import AsyncExitStack, asynccontextmanager
+from functools import partial
 from typing import Annotated
 
 import anyio
 from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response
 from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
 from fastapi.responses import HTMLResponse, JSONResponse
+from pydantic import Field
 from python_multipart.multipart import parse_options_header
 from starlette.datastructures import UploadFile
 from starlette.formparsers import MultiPartException, MultiPartParser
 from starlette.requests import ClientDisconnect
 
-from pipeline.two_stage import ScenePipeline, SceneResult
+from pipeline.two_stage import Detected, ScenePipeline, SceneResult
 from service.cancel import ClientGone, run_until_disconnected
 from service.deps import PipelineDep, SettingsDep, StreamsDep, inference_slot, require_token
 from service.errors import PAYLOAD_TOO_LARGE, UNSUPPORTED_MEDIA, InputError
@@ -32,9 +34,18 @@ from service.model_info import model_info
 from service.openapi import MAX_TEXT_PARTS, RETRY_AFTER, SCENE_FORM, max_file_parts
 from service.openapi import MULTIPART as _MULTIPART
 from service.response import encode
-from service.schemas import Error, Health, ModelInfo, Ready, SceneOut, StreamEnded, StreamFrameOut
+from service.schemas import (
+    Error,
+    Health,
+    ModelInfo,
+    Ready,
+    SceneOut,
+    StreamEnded,
+    StreamFrameDropped,
+    StreamFrameOut,
+)
 from service.settings import Settings
-from service.streams import STREAM_ID, Frame, StreamRegistry, check_stream_id, parse_timestamp
+from service.streams import STREAM_ID, Dropped, Frame, StreamRegistry, check_stream_id, parse_timestamp
 from service.validation import Limits, ValidatedScene, parse_scene, validate_scene
 
 public = APIRouter()
@@ -136,15 +147,16 @@ def metrics_router(protect: bool) -> APIRouter:
 
 @asynccontextmanager
 async def _admitted(
-    request: Request, settings: Settings, streams: StreamRegistry | None = None, **frame
+    request: Request, settings: Settings, streams: StreamRegistry | None = None, slot: bool = True, **frame
 ) -> AsyncIterator[Frame | None]:
-    """An inference slot (``inference_slot``) and, for a stream's frame, the stream (``StreamRegistry.frame``,
-    with ``frame``'s arguments), yielding the stream's frame or None; a refusal of either is counted in
-    ``orpose_rejections_total``."""
+    """An inference slot (``inference_slot``; unless ``slot`` is False) and, for a stream's frame, the stream
+    (``StreamRegistry.frame``, with ``frame``'s arguments), yielding the stream's frame or None; a refusal of
+    either is counted in ``orpose_rejections_total``."""
     metrics: Metrics = request.app.state.metrics
     async with AsyncExitStack() as stack:
         try:
-            await stack.enter_async_context(inference_slot(request, settings))
+            if slot:
+                await stack.enter_async_context(inference_slot(request, settings))
         except HTTPException:
             metrics.rejected("in_flight_full")
             raise
@@ -321,6 +333,15 @@ async def scene_result(
     was unsure of, for the stream's tracker). Returns the result, the validated scene and the decoding time in ms
     (since ``t_start``, a perf_counter).
     """
+    scene, decode_ms = await decoded(request, pipeline, scene_text, files, t_start)
+    result = await pipeline_result(request, pipeline, scene, unsure)
+    return result, scene, decode_ms
+
+
+async def decoded(
+    request: Request, pipeline: ScenePipeline, scene_text: bytes, files: dict[str, bytes], t_start: float
+) -> tuple[ValidatedScene, float]:
+    """A frame's form parts decoded and validated (off the event loop), and the ms since ``t_start``."""
     settings: Settings = request.app.state.settings
     limits = Limits(
         settings.max_views, settings.max_image_pixels, settings.max_boxes_per_view, pipeline.read_size
@@ -336,23 +357,42 @@ async def scene_result(
         raise InputError(
             'this server runs without a detector (no detector weights loaded, or ORPOSE_LOAD_DETECTOR=false): send reference boxes (per view "boxes", optionally "person_ids")'
         )
+    return scene, decode_ms
 
-    def infer() -> SceneResult:
+
+async def on_worker(request: Request, work: Callable[[], object], limiter: anyio.CapacityLimiter):
+    """``work()`` on a worker thread of ``limiter``, stopped when the client leaves (a 400); the models' own
+    checks on what validation let through (ValueError) become 422s that name them."""
+
+    def run():
         try:
-            asked = False if unsure is None else unsure(scene)
-            return pipeline.run(scene.views, scene.boxes, scene.person_ids, unsure=asked)
+            return work()
         except InputError:
             raise
-        except ValueError as exc:  # the models' own checks on what validation let through
+        except ValueError as exc:
             raise InputError(f"the scene could not be processed: {exc}") from None
 
     try:
-        result = await run_until_disconnected(
-            request.receive, infer, limiter=request.app.state.inference_limiter
-        )
+        return await run_until_disconnected(request.receive, run, limiter=limiter)
     except ClientGone as exc:  # nobody reads this answer; it keeps the access log truthful
         raise HTTPException(400, str(exc)) from None
-    return result, scene, decode_ms
+
+
+async def pipeline_result(
+    request: Request,
+    pipeline: ScenePipeline,
+    scene: ValidatedScene,
+    unsure: Callable[[ValidatedScene], object] | None = None,
+    detected: Detected | None = None,
+) -> SceneResult:
+    """``ScenePipeline.run`` on a validated scene, on the inference worker (``detected``: its detector stage,
+    when it already ran)."""
+
+    def infer() -> SceneResult:
+        asked = False if unsure is None else unsure(scene)
+        return pipeline.run(scene.views, scene.boxes, scene.person_ids, unsure=asked, detected=detected)
+
+    return await on_worker(request, infer, request.app.state.inference_limiter)
 
 
 # ----------------------------------------------------------------------------------------------- streams
@@ -382,14 +422,20 @@ _STREAM_ERRORS = {
 }
 
 
+_STREAM_FRAME = Annotated[StreamFrameOut | StreamFrameDropped, Field(discriminator="status")]
+
+
 @protected.post(
     "/streams/{stream_id}/frames",
-    response_model=StreamFrameOut,
+    response_model=_STREAM_FRAME,
     responses=_STREAM_ERRORS,
     summary="One frame of a stream: the persons of POST /scenes, each with its track over time",
     description="The same multipart form as POST /scenes, plus an optional `timestamp_s` field. Frames of one "
-    "stream are answered one at a time and must arrive in time order (else 409). Each person carries its "
-    "`track_id` (stable from frame to frame) and its `smoothed_joints` beside the raw `joints`.",
+    "stream must arrive in time order (else 409). A frame is decoded and detected while the frame before it is "
+    "in the pose stage; each person carries its `track_id` (stable from frame to frame) and its "
+    "`smoothed_joints` beside the raw `joints` (`status` answered). When frames arrive faster than the server "
+    "answers them, a frame still waiting when a newer one arrives is answered at once with `status` dropped "
+    "and why, and the stream never takes it: the lag stays bounded, never a growing queue.",
     openapi_extra={SCENE_FORM: "stream"},
 )
 async def post_stream_frame(
@@ -405,12 +451,27 @@ async def post_stream_frame(
     scene_text = _scene_part(texts)
     timestamp_s = parse_timestamp(texts.get("timestamp_s"))
     frame_of = {"stream_id": stream_id, "timestamp_s": timestamp_s, "received": received}
-    async with _admitted(request, settings, streams, **frame_of) as frame:
-        result, scene, decode_ms = await _result(
-            request, pipeline, scene_text, files, t_start, unsure=frame.prepare
-        )
-        t_encode = time.perf_counter()
-        body = frame.answer(result, scene, decode_ms, t_start)  # the tracker's update and the body
+    # A waiting frame holds no inference slot: it takes one when its front turn starts (a stream then holds at
+    # most three: the front, a frame ready for the pose stage, and the pose stage).
+    async with (
+        _admitted(request, settings, streams, slot=False, **frame_of) as frame,
+        AsyncExitStack() as slot,
+    ):
+        try:
+            async with frame.turn("front"):
+                await slot.enter_async_context(_admitted(request, settings))  # held to the answer
+                scene, decode_ms = await decoded(request, pipeline, scene_text, files, t_start)
+                decode_ms -= frame.waited_ms
+                detected = None
+                if scene.boxes is None:
+                    detect = partial(pipeline.detect, scene.views)
+                    detected = await on_worker(request, detect, request.app.state.front_limiter)
+            async with frame.turn("pose"):  # front's turn passed on: the next frame is decoded meanwhile
+                result = await pipeline_result(request, pipeline, scene, frame.prepare, detected)
+                t_encode = time.perf_counter()
+                body = frame.answer(result, scene, decode_ms, t_start)
+        except Dropped as drop:
+            return Response(frame.dropped(drop, t_start), media_type="application/json")
     _observe(request, STREAM_FRAMES, result, decode_ms, t_encode, t_start)
     return Response(body, media_type="application/json")
 

@@ -200,6 +200,11 @@ class StreamTimings(Timings):
         description="looking for the floor in the depth images, for the room's up (a stream's first frame of a "
         "rig, when the scene gives no up; 0 on the others), ms",
     )
+    wait: float = Field(
+        0.0,
+        description="of total: waiting for the stream's turns, behind its earlier frames (the front stage, "
+        "decoding and detection, overlaps the pose stage of the frame before), ms",
+    )
 
 
 class StreamState(BaseModel):
@@ -226,11 +231,32 @@ class StreamState(BaseModel):
 
 
 class StreamFrameOut(SceneOut):
+    status: Literal["answered"] = Field(
+        "answered", description="answered: the frame went through the pipeline and the stream's tracker"
+    )
     persons: list[TrackedPerson] = Field(  # type: ignore[assignment]
         ..., description="everyone found in the frame (empty when nobody is), with their tracks"
     )
     timings: StreamTimings = Field(..., description="server milliseconds per stage of this request")  # type: ignore[assignment]
     stream: StreamState = Field(..., description="the stream this frame went to")
+
+
+class StreamFrameDropped(BaseModel):
+    """A frame the stream did not take: a newer frame of it arrived while this one waited (service.streams)."""
+
+    status: Literal["dropped"] = Field(
+        "dropped",
+        description="dropped: frames came faster than the server answers them, and this one was replaced by a "
+        "newer frame of its stream before its turn; the stream (its tracks, its last time) is as if it was "
+        "never sent",
+    )
+    stream: str = Field(..., description="the stream's id, as in the path")
+    timestamp_s: float = Field(..., description="this frame's time on the stream's clock, s")
+    clock: Literal["client", "server"] = Field(..., description="as StreamState.clock")
+    newer_timestamp_s: float = Field(..., description="the time of the newer frame that replaced it, s")
+    reason: str = Field(..., description="why, in words, and what to do to have every frame answered")
+    waited_ms: float = Field(..., description="how long it waited before it was dropped, ms")
+    total_ms: float = Field(..., description="from the request's arrival to this answer, ms")
 
 
 class StreamEnded(BaseModel):

@@ -5,10 +5,18 @@ frame goes through the same form reading, validation and pipeline as ``POST /sce
 (``service.routes.scene_result``); then the stream's tracker links its persons to tracks, and the response
 adds a ``track_id`` and the smoothed joints to every person.
 
-- **Order.** A stream answers its frames one at a time (a per-stream lock, taken after the inference slot,
-  so that waiting frames are bounded by ``ORPOSE_MAX_IN_FLIGHT``), and each frame must be later than the last
-  one it took: an older or equal time is a 409 that says what was expected. A rejected frame (4xx) leaves the
-  stream as it was; a stream whose first frame is rejected is not started.
+- **Order.** Each frame must be later than the last one the stream took or is taking: an older or equal time is
+  a 409 that says what was expected. A rejected frame (4xx) leaves the stream as it was; a stream whose first
+  frame is rejected is not started.
+- **Two stages that overlap.** A frame goes through two :class:`Turn` s of its stream, each one frame at a time
+  in arrival order: the *front* (decoding, validation and the detector, on the app's front worker) and the
+  *pose* stage (grouping, the pose network, the tracker's update, on the inference worker). So frame t+1 is
+  decoded and detected while frame t is in the pose stage, each stage on its own core.
+- **Bounded lag.** Of the frames waiting for a turn only the newest waits on: when a newer frame arrives (for
+  the front) or finishes the front (for the pose stage), the older one waiting there is answered at once as
+  dropped (``StreamFrameDropped``: status ``dropped``, why, and the newer frame's time) and the stream never
+  takes it. A stream holds at most four requests (one running and one waiting per stage), whatever the rate
+  the client sends at, so a client that sends faster than the server answers sees drops, never a growing lag.
 - **Time.** A frame's time is its form field ``timestamp_s`` (seconds, on any clock that the client keeps
   for the whole stream). A stream whose first frame has none uses the server's receive time instead, counted
   from that first frame; one stream never mixes the two (409).
@@ -22,8 +30,8 @@ adds a ``track_id`` and the smoothed joints to every person.
   ``ORPOSE_STREAM_IDLE_S`` ends; expired streams are dropped whenever a stream route is called. ``DELETE
   /streams/{stream_id}`` ends one at once; a frame in progress on it is still answered.
 
-Everything here runs on the event loop except the pipeline itself (a worker thread), so the registry needs no
-thread lock; the tracker's update (< 1 ms) runs on the loop under the stream's lock.
+Everything here runs on the event loop except the pipeline itself (worker threads), so the registry and the
+turns need no thread lock; the tracker's update (< 1 ms) runs on the loop in the frame's pose turn.
 """
 
 from __future__ import annotations
@@ -49,6 +57,7 @@ from service.response import scene_out, serialise
 from service.schemas import (
     SmoothedJoint,
     StreamEnded,
+    StreamFrameDropped,
     StreamFrameOut,
     StreamState,
     StreamTimings,
@@ -90,20 +99,91 @@ def parse_timestamp(text: bytes | None) -> float | None:
     return value
 
 
+class Dropped(Exception):
+    """A frame that a newer frame of its stream replaced while it waited for a turn; ``reason`` says so."""
+
+    def __init__(self, reason: str, newer_s: float) -> None:
+        super().__init__(reason)
+        self.reason, self.newer_s = reason, newer_s
+
+
+@dataclass(eq=False)
+class _Ticket:
+    """A frame waiting for a :class:`Turn`: woken when the turn passes to it, or when it is dropped."""
+
+    time: float
+    woken: anyio.Event = field(default_factory=anyio.Event)
+    dropped: Dropped | None = None
+
+
+@dataclass
+class Turn:
+    """One stage of a stream's frames (module docstring): one frame at a time, in arrival order, and of the frames
+    waiting for it only the newest: a frame that arrives while another waits drops that one."""
+
+    name: str  # "front" or "pose": named in a dropped frame's reason
+    busy: bool = False
+    waiting: _Ticket | None = None
+
+    @asynccontextmanager
+    async def take(self, time_s: float) -> AsyncIterator[float]:
+        """Hold the turn for the frame at ``time_s`` (the stream's clock), yielding the ms it waited; raises
+        :class:`Dropped` when a newer frame took its place while it waited."""
+        t0 = time.perf_counter()
+        if self.waiting is not None:
+            older = self.waiting
+            older.dropped = Dropped(
+                f"a newer frame of this stream (at {time_s:.3f} s) arrived while this one (at {older.time:.3f} s) "
+                f"waited for the {self.name} stage: frames came faster than the server answers them, and a "
+                "stream answers its newest frame rather than letting a queue grow; send frames no faster than "
+                "they are answered to have each one answered",
+                time_s,
+            )
+            older.woken.set()
+            self.waiting = None
+        if self.busy:
+            ticket = self.waiting = _Ticket(time_s)
+            try:
+                await ticket.woken.wait()
+            except BaseException:
+                if self.waiting is ticket:
+                    self.waiting = None
+                elif ticket.dropped is None:  # the turn had passed to it: pass it on
+                    self._release()
+                raise
+            if ticket.dropped is not None:
+                raise ticket.dropped
+        else:
+            self.busy = True
+        try:
+            yield (time.perf_counter() - t0) * 1e3
+        finally:
+            self._release()
+
+    def _release(self) -> None:
+        following, self.waiting = self.waiting, None
+        if following is None:
+            self.busy = False
+        else:
+            following.woken.set()  # the turn passes to it (still busy)
+
+
 @dataclass
 class Stream:
-    """One stream's state: its tracker, the last time it took, and who is using it."""
+    """One stream's state: its tracker, the last time it took, its frames in progress, and who is using it."""
 
     id: str
     tracker: Tracker
     last_used: float  # the registry's clock, s: when a request last finished with it
-    lock: anyio.Lock = field(default_factory=anyio.Lock)
-    users: int = 0  # requests holding or waiting for the lock: the stream does not expire under them
+    users: int = 0  # requests in progress: the stream does not expire under them
     frames: int = 0
     clock: str | None = None  # "client" or "server", fixed by the first frame taken
     last_time: float | None = None  # the last frame's time on that clock, s
     origin: float = 0.0  # server clock: the first frame's receive time (registry clock)
     floor: Floor | None = None  # the last look for the floor (for scenes without up)
+    front: Turn = field(default_factory=lambda: Turn("front"))  # decoding and detection
+    pose: Turn = field(default_factory=lambda: Turn("pose"))  # the pose stage and the tracker
+    taking: list[Frame] = field(default_factory=list)  # frames admitted, not yet answered or refused
 
 
 @dataclass(frozen=True)
@@ -222,14 +302,16 @@ class StreamRegistry:
         """
         stream = self.open(stream_id)
         stream.users += 1
+        taken = None
         try:
-            async with stream.lock:
-                clock = "server" if timestamp_s is None else "client"
-                yield Frame(
-                    stream, _frame_time(stream, clock, timestamp_s, received), clock, received, self.floor_up,
-                    self.unsure,
-                )  # fmt: skip
+            clock = "server" if timestamp_s is None else "client"
+            time_s, origin = _frame_time(stream, clock, timestamp_s, received)
+            taken = Frame(stream, time_s, clock, received, self.floor_up, self.unsure, origin=origin)
+            stream.taking.append(taken)
+            yield taken
         finally:
+            if taken is not None:
+                stream.taking.remove(taken)
             stream.users -= 1
             stream.last_used = self.now()
             if not stream.frames and not stream.users and self.streams.get(stream_id) is stream:
@@ -238,39 +320,45 @@ class StreamRegistry:
                 del self.streams[stream_id]
 
 
-def _frame_time(stream: Stream, clock: str, timestamp_s: float | None, received: float) -> float:
-    """The frame's time on the stream's clock; 409 unless it is later than the stream's last frame."""
-    if stream.clock is None:  # the first frame: it fixes the clock once it is taken (Frame.answer)
-        return 0.0 if timestamp_s is None else timestamp_s
+def _frame_time(
+    stream: Stream, clock: str, timestamp_s: float | None, received: float
+) -> tuple[float, float]:
+    """The frame's time on the stream's clock and that clock's origin (the server clock's: the first frame's
+    receive time); 409 unless it is later than every frame the stream took or is taking."""
+    first = stream.taking[0] if stream.clock is None and stream.taking else None
+    fixed, origin = (stream.clock, stream.origin) if first is None else (first.clock, first.origin)
+    last = max([f.time for f in stream.taking] + ([stream.last_time] if stream.clock is not None else []),
+               default=None)  # fmt: skip
+    if fixed is None:  # the first frame: it fixes the clock once it is taken (Frame.answer)
+        return (0.0, received) if timestamp_s is None else (timestamp_s, 0.0)
     sid = stream.id
-    if clock != stream.clock:
-        fix = "give timestamp_s with every frame" if stream.clock == "client" else "leave timestamp_s out"
+    if clock != fixed:
+        fix = "give timestamp_s with every frame" if fixed == "client" else "leave timestamp_s out"
         raise HTTPException(
             CONFLICT,
-            f"stream {sid!r} takes its times from the {stream.clock} "
-            f"({'its frames carry timestamp_s' if stream.clock == 'client' else 'its first frame had no timestamp_s'})"
+            f"stream {sid!r} takes its times from the {fixed} "
+            f"({'its frames carry timestamp_s' if fixed == 'client' else 'its first frame had no timestamp_s'})"
             f", and one stream never mixes clocks: {fix}, or end the stream (DELETE /streams/{sid}) to start over",
         )
     if clock == "client":
         t = timestamp_s
-        if t <= stream.last_time:
+        if t <= last:
             raise HTTPException(
                 CONFLICT,
                 f"frames of stream {sid!r} must arrive in time order: timestamp_s {t:g} is not later than its "
-                f"last frame's {stream.last_time:g}; expected a timestamp_s above {stream.last_time:g} (send "
-                f"frames in order, one after the other's answer), or end the stream (DELETE /streams/{sid}) "
-                "to start over",
+                f"last frame's {last:g}; expected a timestamp_s above {last:g} (send frames in time order), or "
+                f"end the stream (DELETE /streams/{sid}) to start over",
             )
-        return t
-    t = received - stream.origin
-    if t <= stream.last_time:
+        return t, origin
+    t = received - origin
+    if t <= last:
         raise HTTPException(
             CONFLICT,
             f"this frame of stream {sid!r} arrived at {t:.3f} s (server clock, from the stream's first frame), "
-            f"before its last frame ({stream.last_time:.3f} s) was taken: send a stream's frames one at a time, "
-            "each after the previous one's answer, or give each frame its timestamp_s",
+            f"before its last frame ({last:.3f} s) was taken: send a stream's frames in order, or give each "
+            "frame its timestamp_s",
         )
-    return t
+    return t, origin
 
 
 @dataclass
@@ -286,6 +374,25 @@ class Frame:
     up: np.ndarray | None = None  # the room's up the tracker uses (prepare: the scene's, else the floor's)
     look: Floor | None = None  # a new look for the floor, which answer() keeps
     floor_ms: float = 0.0  # what that look cost
+    origin: float = 0.0  # the server clock's origin this frame's time counts from (registry clock)
+    waited_ms: float = 0.0  # waiting for the stream's turns (front and pose)
+
+    @asynccontextmanager
+    async def turn(self, stage: str) -> AsyncIterator[None]:
+        """Hold the stream's ``stage`` ("front" or "pose") for this frame; raises :class:`Dropped` when a newer
+        frame took this one's place while it waited (module docstring)."""
+        async with getattr(self.stream, stage).take(self.time) as waited_ms:
+            self.waited_ms += waited_ms
+            yield
+
+    def dropped(self, drop: Dropped, t_start: float) -> bytes:
+        """The response body of this frame, dropped: nothing of the stream changed."""
+        body = StreamFrameDropped(
+            stream=self.stream.id, timestamp_s=self.time, clock=self.clock, reason=drop.reason,
+            newer_timestamp_s=drop.newer_s, waited_ms=self.waited_ms,
+            total_ms=(time.perf_counter() - t_start) * 1e3,
+        )  # fmt: skip
+        return body.model_dump_json().encode()
 
     def prepare(self, scene: ValidatedScene):
         """The frame's work before its pipeline runs, in the pipeline's worker thread (``service.routes.
@@ -322,7 +429,7 @@ class Frame:
         tracked = stream.tracker.update(joints, spread, self.time, unsure, self.up)
         track_ms = (time.perf_counter() - t_track) * 1e3
         if stream.clock is None:
-            stream.clock, stream.origin = self.clock, self.received
+            stream.clock, stream.origin = self.clock, self.origin
         if self.look is not None:
             stream.floor = self.look
         stream.frames += 1
@@ -348,7 +455,11 @@ class Frame:
             persons=persons,
             notes=out.notes,
             timings=StreamTimings(
-                **out.timings.model_dump(), track=track_ms, unsure=result.unsure_ms, floor=self.floor_ms
+                **out.timings.model_dump(),
+                track=track_ms,
+                unsure=result.unsure_ms,
+                floor=self.floor_ms,
+                wait=self.waited_ms,
             ),
             stream=StreamState(
                 id=stream.id, frames=stream.frames, timestamp_s=self.time, clock=stream.clock, up=up_source

@@ -13,6 +13,7 @@ import csv
 import json
 import subprocess
 import sys
+import threading
 import time
 
 import httpx
@@ -320,6 +321,48 @@ def test_an_idle_stream_expires(server, sequence):
     assert r.status_code == 404 and "expired" in r.json()["detail"]
     server.delete("/streams/idle")
     server.delete("/streams/idle-3")
+
+
+def test_frames_sent_faster_than_answered_are_dropped_with_a_reason_never_queued(server, sequence):
+    """Twelve frames 10 ms apart on one stream, faster than it answers them, more than ORPOSE_MAX_IN_FLIGHT
+    (4): each is answered (no 503: a waiting frame holds no slot), the frames still waiting when a newer one came
+    are dropped with why, the stream takes the others in time order, and the last frame is always answered."""
+    n = 12
+    forms = [sequence.form(k % FRAMES, 100.0 + 0.1 * k) for k in range(n)]
+    answers: list[httpx.Response | None] = [None] * n
+
+    def send(k: int) -> None:
+        answers[k] = server.post("/streams/burst/frames", **forms[k])
+
+    threads = [threading.Thread(target=send, args=(k,)) for k in range(n)]
+    try:
+        for t in threads:
+            t.start()
+            time.sleep(0.01)
+        for t in threads:
+            t.join()
+    finally:
+        ended = server.delete("/streams/burst").json()
+    # Requests sent this close together can overtake each other on the way in: one that arrives after a later
+    # frame is out of time order (409, the stream's rule); every other frame gets its 200.
+    assert all(r.status_code in (200, 409) for r in answers), [r.status_code for r in answers]
+    assert sum(r.status_code == 409 for r in answers) <= n // 3
+    bodies = [r.json() for r in answers if r.status_code == 200]
+    answered = [b for b in bodies if b["status"] == "answered"]
+    dropped = [b for b in bodies if b["status"] == "dropped"]
+    assert dropped and len(answered) >= 2, [b["status"] for b in bodies]
+    assert bodies[-1]["status"] == "answered"  # nothing newer came to replace it
+    assert [b["stream"]["frames"] for b in answered] == list(range(1, len(answered) + 1))
+    assert [b["stream"]["timestamp_s"] for b in answered] == sorted(
+        b["stream"]["timestamp_s"] for b in answered
+    )
+    assert ended["frames"] == len(answered)
+    for b in dropped:
+        assert b["stream"] == "burst" and b["newer_timestamp_s"] > b["timestamp_s"]
+        assert "faster than the server answers" in b["reason"] and b["total_ms"] >= b["waited_ms"] >= 0
+    # Bounded: a frame waits behind at most the frames in the two stages ahead of it, never behind a queue.
+    slowest = max(b["timings"]["total"] - b["timings"]["wait"] for b in answered)
+    assert max(b["timings"]["wait"] for b in answered) <= 2 * slowest + 100
 
 
 # ----------------------------------------------------------------------------------------------- the client
