@@ -29,6 +29,7 @@ import argparse
 import json
 import time
 from collections import defaultdict
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -124,26 +125,44 @@ def stream_cost(data: Path, gt: dict, backend: str, threads: int | None) -> dict
 
 def tracker_config(overrides: list[str]) -> TrackerConfig:
     """The default :class:`TrackerConfig` with ``--set`` overrides ``KEY=VALUE``: ``none`` for None, ``true`` /
-    ``false`` for a flag, else a number of the field's type (a field that is None by default takes a float).
-    ValueError names a field that does not exist or a value it cannot take."""
+    ``false`` for a flag, else a number of the field's type (a field that is None by default takes a float);
+    ``background.KEY`` sets a field of its ``BackgroundConfig``. ValueError names a field that does not exist or a
+    value it cannot take."""
     config = TrackerConfig()
     for item in overrides:
         key, _, value = item.partition("=")
-        if not hasattr(config, key):
-            raise ValueError(f"--set {item}: TrackerConfig has no field {key!r}")
-        current = getattr(config, key)
+        part, _, key = key.rpartition(".")
+        if part not in ("", "background"):
+            raise ValueError(f"--set {item}: TrackerConfig has no part {part!r} (background)")
+        target = config.background if part else config
+        if not hasattr(target, key):
+            raise ValueError(f"--set {item}: {type(target).__name__} has no field {key!r}")
+        current = getattr(target, key)
         if value.lower() == "none":
-            setattr(config, key, None)
+            setattr(target, key, None)
         elif isinstance(current, bool):
             if value.lower() not in ("true", "false"):
                 raise ValueError(f"--set {item}: {key} takes true or false")
-            setattr(config, key, value.lower() == "true")
+            setattr(target, key, value.lower() == "true")
         else:
             try:
-                setattr(config, key, float(value) if current is None else type(current)(value))
+                setattr(target, key, float(value) if current is None else type(current)(value))
             except ValueError:
                 raise ValueError(f"--set {item}: {key} takes a number") from None
     return config
+
+
+def depth_views(data: Path, gt: dict) -> dict[str, list]:
+    """Per frame id its views as the tracker's background reads them: depth (at half size, 320 x 240 for MVOR's
+    640 x 480, as the service decodes them for the shipped networks) and cameras, no colour."""
+    from posenet.data.mvor import MvorDataset
+    from posenet.scene import SceneView
+
+    ds = MvorDataset(data, gt, subsample=2, modalities=("depth",))
+    return {
+        ds[i].id: [SceneView(None, v.depth, v.camera) for v in ds[i].views]
+        for i in tqdm(range(len(ds)), desc="depth", unit="frame")
+    }
 
 
 def _joints(poses: list[dict]) -> np.ndarray:
@@ -220,7 +239,7 @@ def births(frames: list[SequenceFrame], tracker: Tracker, near_mm: float = 500.0
     distance) of an annotated person."""
     seen = defaultdict(lambda: {"height": [], "spread": [], "near": []})
     for f in frames:
-        for p in tracker.update(f.joints, f.spread, f.timestamp_s, f.unsure, f.up):
+        for p in tracker.update(f.joints, f.spread, f.timestamp_s, f.unsure, f.up, f.views):
             if p.track_id is None:
                 continue
             t = seen[p.track_id]
@@ -274,14 +293,19 @@ def main(argv: list[str] | None = None) -> dict:
                    help="also list each confirmed track's first frames (median height along up and spread, the "
                    "lying rule's inputs) and whether it follows an annotated person (offline tracking)")  # fmt: skip
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a TrackerConfig field (offline tracking), e.g. --set max_spread_mm=500")  # fmt: skip
+                   help="override a TrackerConfig field (offline tracking), e.g. --set max_spread_mm=500, or of its "
+                   "background model, e.g. --set background.margin_mm=200")  # fmt: skip
+    p.add_argument("--background", action="store_true",
+                   help="give the tracker each frame's depth images and cameras (offline tracking), as a stream "
+                   "does: it learns the room's static depth and confirms no track on what never moved "
+                   "(pipeline.background)")  # fmt: skip
     args = p.parse_args(argv)
     gt = load_annotations(args.annotations or args.data / "annotations.json")
     try:
         config = tracker_config(args.set)
     except ValueError as err:
         p.error(str(err))
-    report = {"machine": machine_line(), "date": time.strftime("%Y-%m-%d"), "tracker": vars(config).copy()}
+    report = {"machine": machine_line(), "date": time.strftime("%Y-%m-%d"), "tracker": asdict(config)}
     report["sequences"] = {}
     if args.cost:
         report["source"] = "offline, as a stream asks its tracker"
@@ -311,7 +335,11 @@ def main(argv: list[str] | None = None) -> dict:
         report["source"] = f"offline: {args.detections}"
         seconds = [r["seconds"] for r in detections.values()]
         report["pipeline_seconds_per_frame"] = round(float(np.mean(seconds)), 3)
+        report["background"] = args.background
+        views = depth_views(args.data, gt) if args.background else {}
         for seq, rows in sequences(gt, detections).items():
+            for frame_id, frame in rows:
+                frame.views = views.get(frame_id)
             report["sequences"][seq] = evaluate([f for _, f in rows], Tracker(config))
             if args.births:
                 report["sequences"][seq]["births"] = rows_of = births([f for _, f in rows], Tracker(config))
@@ -323,6 +351,9 @@ def main(argv: list[str] | None = None) -> dict:
             f"sequence {seq}: {figures['frames']} frames, {figures['gt_person_frames']} annotated person-frames; "
             f"{figures['ignored_track_frames']} track-frames on persons in view but not annotated left out"
         )
+        print(f"  MOTA {figures['mota']}, HOTA {figures['hota']} (DetA {figures['deta']}, AssA {figures['assa']}; "
+              f"{figures['hota_similarity']}), misses {figures['misses']}, false positives "
+              f"{figures['false_positives']}, phantom tracks {figures['phantom_tracks']}")  # fmt: skip
         for line in goal_lines(figures):
             print("  " + line)
     print(

@@ -47,11 +47,14 @@ Usage::
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from pipeline.background import TORSO, BackgroundConfig, DepthBackground
+from posenet.scene import SceneView
 from posenet.skeleton import BONE_TEMPLATE_MM, BONES, JOINT_INDEX, NUM_JOINTS
 
 _A = np.array([a for a, _ in BONES])
@@ -123,6 +126,17 @@ class TrackerConfig:
     lying_spread_mm: float = 400.0
     # Hysteresis: births need consecutive hits; a confirmed track survives short occlusions.
     birth_hits: int = 3
+    # Phantoms (issue 46): given the frames' views (depth and cameras), a tentative track is confirmed only once
+    # the stream has seen its person move (its torso's filtered centre more than move_mm from where the track was
+    # born), stand where the room's static depth is not (over its last birth_hits frames, a median share of at least
+    # foreground_share of its seen torso joints in front of pipeline.background's model), or hold a pose no static
+    # object explains (a median joint spread of at most pose_spread_mm and, with the room's up, a height along it of
+    # at least pose_height_mm: an upright skeleton the pose network is sure of). Without views nothing changes.
+    move_mm: float = 300.0
+    foreground_share: float = 0.5
+    pose_spread_mm: float | None = 150.0
+    pose_height_mm: float = 450.0
+    background: BackgroundConfig = field(default_factory=BackgroundConfig)
     # Two persons born in one frame within duplicate_mm of each other are one person that the matcher split: only
     # the one with the lower median spread starts a track (the other is then "near a seen track" from the next frame
     # on, and starts none). Before 2026-12-04 both started one, and both were confirmed: on the tuning
@@ -331,7 +345,8 @@ class Tracker:
 
     # the per-track arrays, first axis T
     _PER_TRACK = (
-        "pos", "vel", "cov", "ids", "hits", "unseen_s", "unseen", "bones", "scales", "frames_seen", "recent"
+        "pos", "vel", "cov", "ids", "hits", "unseen_s", "unseen", "bones", "scales", "frames_seen", "recent",
+        "origin", "evidence",
     )  # fmt: skip
 
     def __init__(self, config: TrackerConfig | None = None) -> None:
@@ -348,8 +363,12 @@ class Tracker:
         self.bones = np.zeros((0, c.bone_history, len(BONES)))  # (T, H, B) measured lengths, NaN: none yet
         self.scales = np.zeros((0, c.bone_history))  # (T, H) frame_scales of those lengths, kept beside them
         self.frames_seen = np.zeros(0, int)  # frames with a detection, over the track's life
-        # (T, birth_hits, 2): height along up (NaN without an up) and median spread of its last frames, by frames_seen
-        self.recent = np.zeros((0, c.birth_hits, 2))
+        # (T, birth_hits, 3): height along up (NaN without an up), median spread and share of the torso in front of
+        # the background (NaN without views) of its last frames, by frames_seen
+        self.recent = np.zeros((0, c.birth_hits, 3))
+        self.origin = np.zeros((0, 3))  # (T, 3) the torso's centre where the track was born
+        self.evidence = np.zeros(0, bool)  # seen to move, in front of the background, or in a sure upright pose
+        self.background = DepthBackground(c.background)
         self.time: float | None = None
         self.next_id = 0
 
@@ -409,7 +428,9 @@ class Tracker:
         self.bones = np.concatenate([self.bones, np.full((n, c.bone_history, len(BONES)), np.nan)])
         self.scales = np.concatenate([self.scales, np.full((n, c.bone_history), np.nan)])
         self.frames_seen = np.concatenate([self.frames_seen, np.zeros(n, int)])
-        self.recent = np.concatenate([self.recent, np.full((n, c.birth_hits, 2), np.nan)])
+        self.recent = np.concatenate([self.recent, np.full((n, c.birth_hits, 3), np.nan)])
+        self.origin = np.concatenate([self.origin, joints[:, TORSO].mean(1)])
+        self.evidence = np.concatenate([self.evidence, np.zeros(n, bool)])
 
     @staticmethod
     def _persons(joints, spread) -> tuple[np.ndarray, np.ndarray]:
@@ -458,8 +479,20 @@ class Tracker:
         if c.lying_height_mm is None:
             return lying
         with np.errstate(invalid="ignore"):  # NaN heights (no up) compare False: not lying
-            height, spread = _middle(self.recent, 1).T  # (T,) each
+            height, spread = _middle(self.recent[..., :2], 1).T  # (T,) each
             return (height < c.lying_height_mm) & (spread > c.lying_spread_mm)
+
+    def _seen_alive(self) -> np.ndarray:
+        """``(T,)`` the tracks the stream has seen move, stand in front of the background or hold a sure upright
+        pose (the phantom rule of :class:`TrackerConfig`), from their state after this frame's update."""
+        c = self.config
+        moved = _norm(self.pos[:, TORSO].mean(1) - self.origin) > c.move_mm
+        with np.errstate(invalid="ignore"):  # NaN (no up, no view of the torso) compares False
+            height, spread, front = _middle(self.recent, 1).T  # (T,) each
+            posed = np.zeros_like(moved) if c.pose_spread_mm is None else (spread <= c.pose_spread_mm) & ~(
+                height < c.pose_height_mm
+            )
+            return moved | (front >= c.foreground_share) | posed
 
     def _claims(self, cost: np.ndarray, eligible: np.ndarray) -> np.ndarray:
         """``(P,)`` the track each of the ``eligible`` persons takes (-1: none): optimal assignment on ``cost (T,
@@ -516,6 +549,7 @@ class Tracker:
         timestamp_s: float,
         unsure: np.ndarray | None = None,
         up: np.ndarray | None = None,
+        views: Sequence[SceneView] | None = None,
     ) -> list[TrackedPerson]:
         """Take one frame's persons and return them with their tracks, in input order.
 
@@ -526,6 +560,10 @@ class Tracker:
                 docstring); an unsure person no track takes is returned with ``track_id`` None.
             up: (3,) the room's up direction in the joints' frame, when known: skeletons spanning less than
                 ``min_height_mm`` along it (a person lying down) are not tracked.
+            views: the frame's views (depth images and cameras, the joints' reference frame; the same cameras and
+                sizes over the stream), when known: the tracker learns the room's static depth from them
+                (``pipeline.background``) and confirms no track whose person it has not seen move, stand in front
+                of it, or hold a sure upright pose (``TrackerConfig.move_mm``).
         """
         c = self.config
         joints, spread = self._persons(joints, spread)
@@ -542,6 +580,7 @@ class Tracker:
         unsure = np.zeros(n_dets, bool) if unsure is None else np.asarray(unsure, bool).reshape(n_dets)
         spread_median, height = self._measures(joints, spread, up)  # (P,) each
         usable = self._usable(joints, spread_median, height)  # (P,)
+        front = np.full(n_dets, np.nan) if views is None else self.background.foreground(joints, views)  # (P,)
         track_of = np.full(n_dets, -1)
         if n_tracks and n_dets:
             cost = mean_joint_distance(self.pos, joints)  # (T, P)
@@ -577,9 +616,12 @@ class Tracker:
         have = np.flatnonzero(track_of >= 0)
         rows = track_of[have]
         self.recent[rows, self.frames_seen[rows] % c.birth_hits] = np.stack(
-            [height[have], spread_median[have]], axis=-1
+            [height[have], spread_median[have], front[have]], axis=-1
         )
         confirm = (self.ids < 0) & (self.hits >= c.birth_hits) & ~self._lying()
+        if views is not None:
+            self.evidence |= self._seen_alive()
+            confirm &= self.evidence
         self.ids[confirm] = np.arange(self.next_id, self.next_id + confirm.sum())
         self.next_id += int(confirm.sum())
         # 3. bone-length prior and correction, for the tracks seen in this frame
@@ -606,4 +648,6 @@ class Tracker:
         ]  # fmt: skip
         dead = ((self.ids < 0) & (self.unseen > 0)) | (self.unseen_s > c.max_coast_s)
         self._keep(~dead)
+        if views is not None:  # learn the frame's depth, where no confirmed person stands
+            self.background.update(views, timestamp_s, self.pos[(self.ids >= 0) & (self.unseen == 0)])
         return out

@@ -17,6 +17,14 @@ and the ground truth) and :func:`score` measures its tracks, or tracks made else
 - **Bone lengths**: per track, the standard deviation over time of each bone's length (mm); the mean over
   tracks of each bone's, and the largest of those. Beside it the same for the per-frame joints (per ground-truth
   person) and for the ground truth itself (a twisting trunk changes the shoulder-to-hip sides by ~1 cm).
+- **HOTA** (Luiten et al. 2021, ``trackeval``'s implementation) on a similarity built from 3D joint distances:
+  ``max(0, 1 - d / gate_mm)`` with ``d`` the mean joint distance (mm) between a track and a person, so HOTA's
+  thresholds alpha = 0.05 ... 0.95 are distances of 475 ... 25 mm at the default 500 mm gate (HOTA at alpha 0.5:
+  within 250 mm). Beside it DetA and AssA, and the persons left out as for MOTA/IDF1.
+- **Phantom tracks**: a track-frame is *on nobody* when no person in view (annotated or not) lies within
+  ``gate_mm`` of it; a phantom is a confirmed track most of whose frames are on nobody. Their count, and the
+  longest time any track spent on nobody (s, from its first to its last such frame with no frame on somebody
+  between, plus one frame period).
 - **Cost**: the tracker's milliseconds per frame (mean and 95th percentile).
 """
 
@@ -41,6 +49,7 @@ GOALS = {
     "accel_ratio": ("<=", 0.5),
     "bone_std_max_mm": ("<=", 10.0),
     "track_ms_mean": ("<=", 2.0),
+    "longest_on_nobody_s": ("<=", 1.0),  # issue 46: no track on nobody longer than 1 s
 }
 
 
@@ -55,7 +64,8 @@ class SequenceFrame:
     gt_ids: (G,) person ids; gt_joints: (G, J, 3) mm; joints: (P, J, 3) mm; spread: (P, J) mm; unsure: (P,)
     bool, persons that may only continue a track (``pipeline.track.Tracker.update``), or None; up: (3,) the
     room's up direction in the joints' frame, or None; ignore_joints: (I, J, 3) mm, persons in view whom the
-    ground truth does not annotate (the module docstring), or None.
+    ground truth does not annotate (the module docstring), or None; views: the frame's
+    ``posenet.scene.SceneView`` s, from which the tracker learns the room's static depth, or None.
     """
 
     timestamp_s: float
@@ -66,6 +76,7 @@ class SequenceFrame:
     unsure: np.ndarray | None = None
     up: np.ndarray | None = None
     ignore_joints: np.ndarray | None = None
+    views: list | None = None  # the frame's views (depth and cameras) for the tracker's background, or None
 
 
 def gated_pairs(people: np.ndarray, tracks: dict, gate_mm: float = GATE_MM) -> list[tuple[int, int]]:
@@ -112,6 +123,84 @@ def _accel_error(series: dict) -> float:
     return round(float(np.mean(errors)), 2) if errors else float("nan")
 
 
+def _on_nobody(frame: SequenceFrame, tracks: dict, gate_mm: float) -> set:
+    """The track ids of a frame's ``tracks`` (``{track_id: person}``) with no person in view, annotated or not,
+    within ``gate_mm`` (mean joint distance of the smoothed joints)."""
+    people = [frame.gt_joints.reshape(-1, NUM_JOINTS, 3)]
+    if frame.ignore_joints is not None:
+        people.append(frame.ignore_joints.reshape(-1, NUM_JOINTS, 3))
+    people = np.concatenate(people)
+    if not tracks:
+        return set()
+    if not len(people):
+        return set(tracks)
+    ids = list(tracks)
+    dist = mean_joint_distance(np.array([tracks[t].joints for t in ids]), people)  # (T, G)
+    return {t for t, d in zip(ids, dist.min(1), strict=True) if d > gate_mm}
+
+
+def phantoms(frames: list[SequenceFrame], hyps: list[dict], gate_mm: float = GATE_MM) -> dict:
+    """Tracks on nobody (module docstring): ``phantom_tracks`` (confirmed tracks with more than half of their
+    frames on nobody), ``on_nobody_track_frames``, and ``longest_on_nobody_s`` with the track it was."""
+    times = np.array([f.timestamp_s for f in frames])
+    period = float(np.median(np.diff(times))) if len(times) > 1 else 0.0
+    frames_of, nobody_of = defaultdict(int), defaultdict(int)
+    run_start: dict = {}  # track -> the first time of its current run on nobody
+    longest, longest_track = 0.0, None
+    for fr, hyp in zip(frames, hyps, strict=True):
+        nobody = _on_nobody(fr, hyp, gate_mm)
+        for t in hyp:
+            frames_of[t] += 1
+            if t in nobody:
+                nobody_of[t] += 1
+                start = run_start.setdefault(t, fr.timestamp_s)
+                if fr.timestamp_s - start + period > longest:
+                    longest, longest_track = fr.timestamp_s - start + period, t
+            else:
+                run_start.pop(t, None)
+    return {
+        "phantom_tracks": sum(nobody_of[t] > frames_of[t] / 2 for t in frames_of),
+        "on_nobody_track_frames": int(sum(nobody_of.values())),
+        "longest_on_nobody_s": round(longest, 3),
+        "longest_on_nobody_track": longest_track,
+    }
+
+
+def hota(frames: list[SequenceFrame], hyps: list[dict], gate_mm: float = GATE_MM) -> dict:
+    """HOTA, DetA and AssA (means over trackeval's alpha thresholds) and HOTA at alpha 0.5, with the similarity
+    ``max(0, 1 - d / gate_mm)`` of the mean joint distance ``d`` (module docstring). ``hyps`` as :func:`score`
+    reads them, the persons the ground truth leaves unannotated already left out."""
+    try:
+        from trackeval.metrics import HOTA
+    except ImportError as exc:
+        raise ImportError(
+            "HOTA needs trackeval: pip install 'or-pose[eval]' (or pip install trackeval)"
+        ) from exc
+
+    gt_index, track_index = {}, {}  # trackeval counts ids from 0 with no gaps
+    data: dict = {"gt_ids": [], "tracker_ids": [], "similarity_scores": []}
+    for fr, hyp in zip(frames, hyps, strict=True):
+        ids = list(hyp)
+        smoothed = np.array([hyp[t].joints for t in ids]).reshape(len(ids), NUM_JOINTS, 3)
+        dist = mean_joint_distance(fr.gt_joints.reshape(-1, NUM_JOINTS, 3), smoothed)  # (G, H)
+        data["gt_ids"].append(np.array([gt_index.setdefault(int(g), len(gt_index)) for g in fr.gt_ids], int))
+        data["tracker_ids"].append(np.array([track_index.setdefault(t, len(track_index)) for t in ids], int))
+        data["similarity_scores"].append(np.maximum(0.0, 1.0 - dist / gate_mm))
+    data["num_gt_ids"], data["num_tracker_ids"] = len(gt_index), len(track_index)
+    data["num_gt_dets"] = sum(len(g) for g in data["gt_ids"])
+    data["num_tracker_dets"] = sum(len(t) for t in data["tracker_ids"])
+    metric = HOTA()
+    res = metric.eval_sequence(data)
+    half = int(np.argmin(np.abs(metric.array_labels - 0.5)))
+    return {
+        "hota": round(float(np.mean(res["HOTA"])), 4),
+        "deta": round(float(np.mean(res["DetA"])), 4),
+        "assa": round(float(np.mean(res["AssA"])), 4),
+        "hota_at_half": round(float(res["HOTA"][half]), 4),
+        "hota_similarity": f"max(0, 1 - mean joint distance / {gate_mm:g} mm)",
+    }
+
+
 @dataclass
 class TrackedPerson:
     """A confirmed track's person in one frame: raw (J, 3) and smoothed (J, 3) joints, mm (as
@@ -128,7 +217,7 @@ def run_tracker(frames: list[SequenceFrame], tracker: Tracker) -> tuple[list[dic
     ms, hyps = [], []
     for fr in frames:
         t0 = time.perf_counter()
-        out = tracker.update(fr.joints, fr.spread, fr.timestamp_s, fr.unsure, fr.up)
+        out = tracker.update(fr.joints, fr.spread, fr.timestamp_s, fr.unsure, fr.up, fr.views)
         ms.append((time.perf_counter() - t0) * 1e3)
         hyps.append({p.track_id: p for p in out if p.track_id is not None})
     return hyps, ms
@@ -159,11 +248,12 @@ def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_m
     if len(hyps) != len(frames):
         raise ValueError(f"{len(hyps)} frames of tracks for {len(frames)} frames of ground truth")
     acc = mm.MOTAccumulator(auto_id=True)
-    ignored = 0
+    ignored, kept = 0, []
     for fr, hyp in zip(frames, hyps, strict=True):
         left_out = _ignored(fr, hyp, gate_mm)
         ignored += len(left_out)
         hyp = {t: p for t, p in hyp.items() if t not in left_out}
+        kept.append(hyp)
         confirmed = list(hyp.values())
         smoothed = np.array([p.joints for p in confirmed]).reshape(len(confirmed), NUM_JOINTS, 3)
         dist = mean_joint_distance(fr.gt_joints.reshape(-1, NUM_JOINTS, 3), smoothed)  # (G, H)
@@ -220,6 +310,8 @@ def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_m
         "bone_std_per_frame_mm": bones_raw,
         "bone_std_ground_truth_max_mm": bones_gt_max,
         "bone_std_ground_truth_mm": bones_gt,
+        **hota(frames, kept, gate_mm),
+        **phantoms(frames, hyps, gate_mm),
         "track_ms_mean": round(float(np.mean(ms)), 3),
         "track_ms_p95": round(float(np.percentile(ms, 95)), 3),
         "gate_mm": gate_mm,
