@@ -4,6 +4,7 @@
     python benchmarks/synth_speed.py --frames 12 --mvor ../shared/mvor/camma_mvor_2018.json  # twin frames too
     python benchmarks/synth_speed.py --frames 12 --looks twin random alt  # each look (default: all of them)
     python benchmarks/synth_speed.py --frames 8 --mvor $MVOR --looks twin random mesh --residual  # mesh bodies
+    python benchmarks/synth_speed.py --frames 12 --looks twin random --hard-negatives 4  # random with and without
 
 Stages: building the frame (poses, room; for the twin also the occluder placement), ray casting (z-buffer,
 ids, normals), the sensor models (depth and colour), and PNG encoding (in memory, so the disk does not count).
@@ -140,6 +141,8 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--looks", nargs="+", choices=LOOKS, default=list(LOOKS), help="looks to time")
     p.add_argument("--residual", action="store_true", help="also the mesh bodies' joint residual")
+    p.add_argument("--hard-negatives", type=int, default=0, metavar="N",
+                   help="also time the random and mesh looks with N hard negatives tried per frame")  # fmt: skip
     args = p.parse_args()
     cv2.setNumThreads(1)
     rng = np.random.default_rng(args.seed)
@@ -151,17 +154,28 @@ def main() -> None:
         from posenet.synth.mesh_model import load
 
         load()  # build the mesh's arrays before any timing
-    for name in args.looks:
+    runs = [(name, 0) for name in args.looks]
+    if args.hard_negatives:
+        runs += [(name, args.hard_negatives) for name in args.looks if name in ("random", "mesh")]
+    for name, negatives in runs:
 
-        def procedural(r, name=name):  # the look draws from its own generator, as in the writer
+        def procedural(r, name=name, negatives=negatives):
+            # The look draws from its own generator, as in the writer.
             frame = procedural_frame(r, enclose=enclose)
-            look = None if name == "twin" else make_look(name, np.random.default_rng(r.integers(1 << 62)))
+            look = None
+            if name != "twin":
+                look = make_look(name, np.random.default_rng(r.integers(1 << 62)), hard_negatives=negatives)
             if look is not None:
                 for person in frame.persons:
                     look.dress(person)
                 look.finish(frame, rig)
             return frame
 
+        if negatives:
+            out[f"procedural, {name} + {negatives} hard negatives (3 views)"] = run(
+                procedural, rig, args.frames, args.seed
+            )
+            continue
         out[f"procedural, {name} (3 views)"] = run(procedural, rig, args.frames, args.seed)
         if ctx is not None:
             infos = ctx.frames[:: max(len(ctx.frames) // args.frames, 1)][: args.frames]

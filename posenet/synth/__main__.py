@@ -23,7 +23,16 @@ import os
 from dataclasses import asdict
 from pathlib import Path
 
-from posenet.synth.looks import BODY_PARTS, DRAWN_GOWN_SHARE, GRAMMAR_SHARE, LOOKS, MESH_SHARE, PARTS
+from posenet.synth.hard_negatives import KINDS as HARD_NEGATIVE_KINDS
+from posenet.synth.looks import (
+    BODY_PARTS,
+    DRAWN_GOWN_SHARE,
+    GRAMMAR_SHARE,
+    HARD_NEGATIVES,
+    LOOKS,
+    MESH_SHARE,
+    PARTS,
+)
 from posenet.synth.writer import (
     ANNOTATIONS,
     MIN_KEYPOINTS_IN_IMAGE,
@@ -146,6 +155,15 @@ def build_parser() -> argparse.ArgumentParser:
         "intended training share; --look mesh is a share of 1)",
     )
     p.add_argument(
+        "--hard-negatives",
+        type=int,
+        default=HARD_NEGATIVES,
+        metavar="N",
+        help="random and mesh looks: try to place N hard negatives per frame (per sequence with --sequence) along "
+        f"the walls, things a detector takes for people and never annotated ({', '.join(HARD_NEGATIVE_KINDS)}), "
+        f"drawn after everything else (default {HARD_NEGATIVES}: as before; 3 is the intended training value)",
+    )
+    p.add_argument(
         "--annotate",
         choices=ANNOTATIONS,
         default="mvor",
@@ -162,6 +180,16 @@ def build_parser() -> argparse.ArgumentParser:
 def config_from_args(args: argparse.Namespace) -> SynthConfig:
     if (args.from_mvor is not None) + (args.scenes is not None) + args.sequence != 1:
         raise SystemExit("error: give exactly one of --from-mvor ANNOTATIONS.json, --scenes N or --sequence")
+    if args.hard_negatives < 0:
+        raise SystemExit(
+            f"error: --hard-negatives must be 0 or more (objects per frame), got {args.hard_negatives}"
+        )
+    look = args.look or ("twin" if args.from_mvor is not None else "random")
+    if args.hard_negatives and look not in ("random", "mesh"):
+        raise SystemExit(
+            f"error: --hard-negatives draws into the random and mesh looks only (--look {look} is fixed); add "
+            "--look random or --look mesh"
+        )
     if args.from_mvor is not None:
         return SynthConfig(
             out=args.out,
@@ -178,6 +206,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
             grammar_share=args.grammar_share,
             drawn_gowns=args.drawn_gowns,
             mesh_share=args.mesh_share,
+            hard_negatives=args.hard_negatives,
         )
     # Procedural scenes and sequences: the same procedural world, one frame at a time or over time.
     common = dict(
@@ -192,6 +221,7 @@ def config_from_args(args: argparse.Namespace) -> SynthConfig:
         grammar_share=args.grammar_share,
         drawn_gowns=args.drawn_gowns,
         mesh_share=args.mesh_share,
+        hard_negatives=args.hard_negatives,
         annotate=args.annotate,
     )
     if args.sequence:

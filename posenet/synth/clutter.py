@@ -92,23 +92,70 @@ def _sphere_corners(prims: list[Primitive]) -> np.ndarray:
     return np.concatenate(pts)
 
 
+class Placement:
+    """The checks that every object added to a frame's room passes (occluders here, hard negatives in
+    :mod:`~posenet.synth.hard_negatives`): it stays below the ceiling (unless it hangs from it), 60 cm from every
+    camera, fills at most 35 % of any image, and leaves the ``protect`` (view, person) pairs visible (module
+    docstring). It draws nothing from any generator."""
+
+    def __init__(self, frame, rig: Rig, protect: set[tuple[int, int]] | None = None) -> None:
+        self.frame, self.rig, self.protect = frame, rig, protect
+        shell = next((p for p in frame.room if p.kind == SHELL), None)
+        self.shell = shell
+        self.ceiling = float(shell.center[2] + shell.size[2]) if shell is not None else 2900.0
+        self.cams = rig.cam_to_world[:, :3, 3]  # (V, 3)
+        self.T = rig.world_to_cam()
+        self.sil = self.seen = None
+        if protect:
+            from posenet.synth.scene import silhouettes, visible_pixels  # scene imports the body models
+
+            self.sil = silhouettes(frame, rig)
+            self.seen = visible_pixels(frame, rig)
+
+    def fits(self, prims: list[Primitive], hangs: bool = False) -> bool:
+        """Whether ``prims`` pass the geometric checks (``hangs``: it may reach the ceiling)."""
+        corners = _sphere_corners(prims)
+        if corners[:, 2].max() > self.ceiling + 50 and not hangs:
+            return False
+        if np.linalg.norm(self.cams[:, None] - corners[None], axis=-1).min() < 600:
+            return False
+        depth = (corners @ self.T[:, 2, :3].T + self.T[:, 2, 3]).T  # (V, N) z in each camera
+        proj = project_boxes(self.rig, corners[None])[:, 0]  # (V, 4)
+        area = (proj[:, 2] - proj[:, 0]) * (proj[:, 3] - proj[:, 1])
+        sizes = np.array([K.width * K.height for K in self.rig.intrinsics])
+        if ((area > 0.35 * sizes) & (depth.max(1) > 0)).any():
+            return False
+        sil = self.sil
+        return sil is None or not any(
+            (w, q) in sil and depth[w].min() < sil[(w, q)][1] and covered(proj[w], sil[(w, q)][0]) > 0.35
+            for w, q in self.protect
+        )
+
+    def add(self, prims: list[Primitive]) -> bool:
+        """Add ``prims`` to the room unless they take too much of a protected person (then nothing is added)."""
+        self.frame.room.extend(prims)
+        if self.seen is not None:
+            from posenet.synth.scene import visible_pixels
+
+            now = visible_pixels(self.frame, self.rig)
+            if not all(
+                _keeps_box(self.seen[k], now[k], self.sil[k][2]) for k in self.protect if k in self.sil
+            ):
+                del self.frame.room[-len(prims) :]
+                return False
+            self.seen = now
+        return True
+
+
 def add_clutter(frame, rig: Rig, rng: np.random.Generator, kinds: tuple[str, ...], count: int,
                 scale: tuple[float, float], protect: set[tuple[int, int]] | None = None,
                 random_materials: bool = False, tries: int = 6) -> int:  # fmt: skip
     """Add up to ``count`` occluders of ``kinds`` to ``frame.room``; returns how many were added."""
     if count == 0 or not frame.persons:
         return 0
-    shell = next((p for p in frame.room if p.kind == SHELL), None)
-    ceiling = float(shell.center[2] + shell.size[2]) if shell is not None else 2900.0
+    place = Placement(frame, rig, protect)
     pelvis = np.array([(p.points[F["left_hip"]] + p.points[F["right_hip"]])[:2] / 2 for p in frame.persons])
-    cams = rig.cam_to_world[:, :3, 3]
-    T = rig.world_to_cam()
-    sil = seen = None
-    if protect:
-        from posenet.synth.scene import silhouettes, visible_pixels  # scene imports the body models
-
-        sil = silhouettes(frame, rig)
-        seen = visible_pixels(frame, rig)
+    cams = place.cams
     added = 0
     for _ in range(count):
         kind = str(kinds[rng.integers(len(kinds))])
@@ -121,32 +168,13 @@ def add_clutter(frame, rig: Rig, rng: np.random.Generator, kinds: tuple[str, ...
             to_cam = cams[v] - pos
             yaw = float(np.arctan2(to_cam[1], to_cam[0]) + rng.normal(0, 0.3))
             mat = _random_material(rng) if random_materials and rng.random() < 0.5 else None
-            prims = occluder(kind, pos, yaw, float(rng.uniform(*scale)), ceiling, rng, mat)
+            prims = occluder(kind, pos, yaw, float(rng.uniform(*scale)), place.ceiling, rng, mat)
             if kind in FLOOR_KINDS and np.linalg.norm(pelvis - pos[:2], axis=1).min() < 400:
                 continue
-            corners = _sphere_corners(prims)
-            if corners[:, 2].max() > ceiling + 50 and kind not in ("panel", "lamp", "column", "boom"):
+            if not place.fits(prims, hangs=kind in ("panel", "lamp", "column", "boom")):
                 continue
-            if np.linalg.norm(cams[:, None] - corners[None], axis=-1).min() < 600:
+            if not place.add(prims):
                 continue
-            depth = (corners @ T[:, 2, :3].T + T[:, 2, 3]).T  # (V, N) z in each camera
-            proj = project_boxes(rig, corners[None])[:, 0]  # (V, 4)
-            area = (proj[:, 2] - proj[:, 0]) * (proj[:, 3] - proj[:, 1])
-            sizes = np.array([K.width * K.height for K in rig.intrinsics])
-            if ((area > 0.35 * sizes) & (depth.max(1) > 0)).any():
-                continue
-            if sil is not None and any(
-                (w, q) in sil and depth[w].min() < sil[(w, q)][1] and covered(proj[w], sil[(w, q)][0]) > 0.35
-                for w, q in protect
-            ):
-                continue
-            frame.room.extend(prims)
-            if seen is not None:
-                now = visible_pixels(frame, rig)
-                if not all(_keeps_box(seen[k], now[k], sil[k][2]) for k in protect if k in sil):
-                    del frame.room[-len(prims) :]
-                    continue
-                seen = now
             added += 1
             break
     return added

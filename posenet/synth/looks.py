@@ -32,6 +32,7 @@ import numpy as np
 from posenet.synth.body import BODY_REGIONS, BodyShape, Outfit
 from posenet.synth.body_alt import ALT_SHAPE
 from posenet.synth.clutter import add_clutter
+from posenet.synth.hard_negatives import add_hard_negatives
 from posenet.synth.primitives import Material
 from posenet.synth.rig import Rig
 from posenet.synth.sensor import ColourSensorConfig, DepthSensorConfig, Lighting
@@ -61,6 +62,11 @@ DRAWN_GOWN_SHARE = 0.0
 # meshes, the other half primitives of both constructions), once the networks are retrained on it. The `mesh` look
 # is the random look with every body a mesh (the same bytes as `random` with a share of 1).
 MESH_SHARE = 0.0
+
+# Default number of hard negatives (posenet.synth.hard_negatives: coats and gowns on hooks and stands, lead aprons
+# on a rack, stools, equipment towers, gowns on dress forms) that the random and mesh looks try to place in a
+# frame, from a generator of their own; 0 renders as before they existed. The intended training value is 3.
+HARD_NEGATIVES = 0
 
 
 def uses_mesh(look: str, mesh_share: float = MESH_SHARE) -> bool:
@@ -109,7 +115,11 @@ class Look:
     ``alt-mesh`` dresses and lights a frame exactly as ``alt`` does (the same draws from ``rng``, so the same
     outfits, and the occluders are drawn alike), but builds each person as an anny mesh body
     (:func:`alt_mesh_shape`) whose seed comes from a generator spawned from ``rng``, which leaves ``rng``'s
-    draws as they are."""
+    draws as they are.
+
+    ``hard_negatives`` (the random and mesh looks, with their occluders): up to that many hard negatives
+    (:mod:`~posenet.synth.hard_negatives`) are added after the occluders, drawn from another generator spawned
+    from ``rng``, so everything else in the frame stays as without them."""
 
     def __init__(
         self,
@@ -119,6 +129,7 @@ class Look:
         grammar_share: float = GRAMMAR_SHARE,
         drawn_gowns: float = DRAWN_GOWN_SHARE,
         mesh_share: float = MESH_SHARE,
+        hard_negatives: int = HARD_NEGATIVES,
     ) -> None:
         if name not in LOOKS:
             raise ValueError(f"unknown look {name!r}; expected one of {LOOKS}")
@@ -126,8 +137,13 @@ class Look:
         self.grammar_share = check_share(grammar_share)
         self.drawn_gowns = check_share(drawn_gowns, "drawn_gowns")
         self.mesh_share = 1.0 if name == "mesh" else check_share(mesh_share, "mesh_share")
+        if hard_negatives < 0:
+            raise ValueError(f"hard_negatives must be >= 0 (objects per frame), got {hard_negatives}")
         self.scene, self.lighting = (None, None)
-        self.body_rng = None
+        self.body_rng = self.negatives_rng = None
+        self.hard_negatives = int(hard_negatives) if name in ("random", "mesh") else 0
+        if self.hard_negatives:
+            self.negatives_rng = rng.spawn(1)[0]
         if name in ("random", "mesh"):
             self.scene, self.lighting = random_scene(rng)
         elif name in HELD_OUT:
@@ -154,12 +170,19 @@ class Look:
         elif regions := tuple(p.split(":")[1] for p in BODY_PARTS if p in self.parts):
             person.shape = replace(shape, regions=regions)
 
-    def finish(self, frame, rig: Rig, protect: set[tuple[int, int]] | None = None) -> dict[str, int]:
-        """Add this look's occluders (covering little of the ``protect`` (view, person) pairs) and set its
-        lighting and sensors on ``frame``; returns how many occluders were added."""
+    def finish(
+        self,
+        frame,
+        rig: Rig,
+        protect: set[tuple[int, int]] | None = None,
+        keep_clear: np.ndarray | None = None,
+    ) -> dict:
+        """Add this look's occluders and hard negatives (covering little of the ``protect`` (view, person) pairs;
+        the hard negatives also clear of the floor points ``keep_clear (N, 2)``, a sequence's walks) and set its
+        lighting and sensors on ``frame``; returns how many occluders (and hard negatives) were added."""
         if self.name == "twin":
             return {}
-        added = 0
+        added, stats = 0, {}
         if "occluders" in self.parts:
             if self.name in ("random", "mesh"):
                 kinds = ("panel", "pole", "cart", "screen", "lamp", "stand")
@@ -171,6 +194,12 @@ class Look:
                 added = add_clutter(
                     frame, rig, self.rng, ("column", "boom", "trolley"), 2, (1.0, 1.0), protect
                 )
+            if self.hard_negatives:
+                kinds = add_hard_negatives(
+                    frame, rig, self.negatives_rng, self.hard_negatives, protect, keep_clear
+                )
+                stats["hard_negatives"] = len(kinds)
+                stats["hard_negative_kinds"] = kinds  # the k-th: owner id OWNER_HARD_NEGATIVE - k
         if self.parts >= {"colour", "depth"}:
             frame.look, frame.lighting = self.scene, self.lighting
         elif "colour" in self.parts:  # the twin's depth sensor under this look's light and camera
@@ -178,7 +207,7 @@ class Look:
             frame.lighting = self.lighting
         elif "depth" in self.parts:  # this look's depth sensor, the twin's light and camera
             frame.look = SceneLook(self.name, depth=self.scene.depth, dropout_gain=self.scene.dropout_gain)
-        return {"clutter": added}
+        return {"clutter": added, **stats}
 
 
 def make_look(
@@ -188,10 +217,13 @@ def make_look(
     grammar_share: float = GRAMMAR_SHARE,
     drawn_gowns: float = DRAWN_GOWN_SHARE,
     mesh_share: float = MESH_SHARE,
+    hard_negatives: int = HARD_NEGATIVES,
 ) -> Look | None:
     """The :class:`Look` for ``name`` (only its ``parts``, default all), or None for ``twin`` (which draws
     nothing)."""
-    return None if name == "twin" else Look(name, rng, parts, grammar_share, drawn_gowns, mesh_share)
+    if name == "twin":
+        return None
+    return Look(name, rng, parts, grammar_share, drawn_gowns, mesh_share, hard_negatives)
 
 
 # ------------------------------------------------------------------ random: bodies

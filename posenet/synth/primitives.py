@@ -20,6 +20,9 @@ MESH = 5  # a triangle mesh (``Primitive.mesh``), rasterised by posenet.synth.me
 # Owner ids below zero are not persons (persons are 0, 1, 2, ...).
 OWNER_ROOM = -1  # furniture and equipment
 OWNER_SHELL = -2  # floor, walls, ceiling
+# Hard negatives (posenet.synth.hard_negatives): -10, -11, ..., one id per object, so that a view's owner map tells
+# them apart; everything else reads them as the room.
+OWNER_HARD_NEGATIVE = -10
 
 
 @dataclass(frozen=True)

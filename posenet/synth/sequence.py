@@ -345,8 +345,12 @@ def build_stage(
     if look is not None:
         for person in people + ([patient] if patient is not None else []):
             look.dress(person)
-        # Occluders are placed once, against the persons in the middle of the sequence.
+        # Occluders are placed once, against the persons in the middle of the sequence; hard negatives also keep
+        # clear of everyone's whole walk.
         middle = stage.frame(frames // 2)
-        stats = look.finish(middle, rig)
+        walk = None
+        if getattr(look, "hard_negatives", 0):
+            walk = np.concatenate([p.points[:, :2] for k in range(frames) for p in stage.frame(k).persons])
+        stats = look.finish(middle, rig, keep_clear=walk)
         stage.room, stage.lighting, stage.look = middle.room, middle.lighting, middle.look
     return stage, stats

@@ -35,6 +35,7 @@ from posenet.skeleton import BONES, JOINTS
 from posenet.synth.looks import (
     DRAWN_GOWN_SHARE,
     GRAMMAR_SHARE,
+    HARD_NEGATIVES,
     LOOKS,
     MESH_SHARE,
     Look,
@@ -45,7 +46,7 @@ from posenet.synth.looks import (
 )
 from posenet.synth.procedural import procedural_frame
 from posenet.synth.rig import Rig, random_rig
-from posenet.synth.scene import Frame, render_frame
+from posenet.synth.scene import Frame, ViewRender, render_frame
 from posenet.synth.sequence import Stage, build_stage
 from posenet.synth.skeleton_full import NUM_MVOR_POINTS
 from posenet.synth.twin import TwinContext, load_twin, twin_frame
@@ -98,6 +99,7 @@ class SynthConfig:
     grammar_share: float = GRAMMAR_SHARE  # random look: share of bodies built by the body grammar
     drawn_gowns: float = DRAWN_GOWN_SHARE  # random look: share of bodies with a gown of a drawn cut
     mesh_share: float = MESH_SHARE  # random look: share of anny mesh bodies (the mesh look: all)
+    hard_negatives: int = HARD_NEGATIVES  # random and mesh looks: hard negatives per frame (sequence)
     annotate: str = "mvor"  # procedural and sequence: which boxed persons are annotated (ANNOTATIONS)
     frames: int = 60  # sequence: frames per sequence
     fps: float = 15.0  # sequence: frame rate (the frames' timestamp_s)
@@ -251,6 +253,7 @@ def sequence_stage(cfg: SynthConfig, rigs: DatasetRigs, day: int) -> tuple[Stage
             cfg.grammar_share,
             cfg.drawn_gowns,
             cfg.mesh_share,
+            cfg.hard_negatives,
         )
         rng = frame_rng(cfg.seed, cfg.mode, day, 0, purpose=3)
         stages[day] = build_stage(rng, rigs.rigs[day], cfg.frames, cfg.fps, cfg.persons, look)
@@ -279,12 +282,11 @@ def _build_frame(
     return frame, look.finish(frame, rig)
 
 
-def render_job(job: Job) -> JobResult:
-    """Render one frame, write its PNGs, and return its annotation records."""
-    cfg: SynthConfig = _STATE["cfg"]
-    rigs: DatasetRigs = _STATE["rigs"]
-    twin: TwinContext | None = _STATE["twin"]
-    t0 = time.perf_counter()
+def frame_views(
+    cfg: SynthConfig, rigs: DatasetRigs, twin: TwinContext | None, job: Job
+) -> tuple[Frame, list[ViewRender], dict]:
+    """One frame of the dataset built and rendered in memory, exactly as :func:`render_job` writes it: the
+    frame, its views and the look's stats (sequences: after :func:`_init_worker`)."""
     rng = frame_rng(cfg.seed, cfg.mode, job.day, job.frame)
     look = make_look(
         cfg.look,
@@ -293,10 +295,20 @@ def render_job(job: Job) -> JobResult:
         cfg.grammar_share,
         cfg.drawn_gowns,
         cfg.mesh_share,
+        cfg.hard_negatives,
     )
     frame, stats = _build_frame(cfg, rigs, twin, job, rng, look)
+    return frame, render_frame(frame, rigs.rigs[job.day], rng), stats
+
+
+def render_job(job: Job) -> JobResult:
+    """Render one frame, write its PNGs, and return its annotation records."""
+    cfg: SynthConfig = _STATE["cfg"]
+    rigs: DatasetRigs = _STATE["rigs"]
+    twin: TwinContext | None = _STATE["twin"]
+    t0 = time.perf_counter()
+    frame, views, stats = frame_views(cfg, rigs, twin, job)
     rig = rigs.rigs[job.day]
-    views = render_frame(frame, rig, rng)
     out = Path(cfg.out)
     world_to_ref = np.linalg.inv(rigs.ref_to_world[job.day])
     images, boxes = [], []
@@ -413,6 +425,8 @@ def generate(cfg: SynthConfig, progress: bool = True) -> dict:
     check_share(cfg.grammar_share)
     check_share(cfg.drawn_gowns, "drawn_gowns")
     check_share(cfg.mesh_share, "mesh_share")
+    if cfg.hard_negatives < 0:
+        raise ValueError(f"hard_negatives must be >= 0 (objects per frame), got {cfg.hard_negatives}")
     if uses_mesh(cfg.look, cfg.mesh_share):
         from posenet.synth.mesh_model import load
 
@@ -500,7 +514,15 @@ def summarise(results: list[JobResult], wall: float) -> dict:
     support = np.bincount([s for r in results for s in r.stats.get("support", [])], minlength=5)
     hide = {}
     for r in results:
-        for k in ("occluder", "not_drawn", "out_of_view", "bystanders", "bystanders_dropped", "clutter"):
+        for k in (
+            "occluder",
+            "not_drawn",
+            "out_of_view",
+            "bystanders",
+            "bystanders_dropped",
+            "clutter",
+            "hard_negatives",
+        ):
             if k in r.stats:
                 hide[k] = hide.get(k, 0) + r.stats[k]
     out = {
