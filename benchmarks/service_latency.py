@@ -43,7 +43,7 @@ from service_harness import Server, tiny_checkpoints  # noqa: E402
 from pipeline.matching import match_boxes  # noqa: E402
 from posenet.data.images import read_depth  # noqa: E402
 from posenet.data.mvor import MvorDataset  # noqa: E402
-from service.client import scene_request  # noqa: E402
+from service.client import Transport, scene_request  # noqa: E402
 
 MVOR_JSON = REPO.parent / "shared" / "mvor" / "camma_mvor_2018.json"
 STAGES = ("decode", "detect", "match", "pose", "encode", "total")
@@ -70,9 +70,11 @@ def groups_of(sample, root: Path) -> list[list[int]]:
     return [list(g.indices) for g in groups]
 
 
-def reference_request(sample, root: Path, persons: int) -> tuple[dict, list]:
+def reference_request(
+    sample, root: Path, persons: int, transport: Transport | None = None
+) -> tuple[dict, list]:
     """A request with reference boxes for exactly ``persons`` persons (the largest groups of the frame)."""
-    scene, files = scene_request(sample, root, reference_boxes=False)
+    scene, files = scene_request(sample, root, False, transport)
     groups = sorted(groups_of(sample, root), key=lambda g: -sum(i >= 0 for i in g))[:persons]
     if len(groups) < persons:
         raise SystemExit(f"frame {sample.id} has only {len(groups)} persons, {persons} needed")
@@ -94,41 +96,6 @@ def pick_frames(ds: MvorDataset, root: Path) -> dict[int, int]:
     if len(found) < 2:
         raise SystemExit(f"need a 1-person and a 3-person frame in the dataset, found {found}")
     return found
-
-
-def _reencoded(files: list, prefix: str, reencode) -> list:
-    """The request's parts whose name starts with ``prefix`` passed through ``reencode((filename, data, mime))``,
-    once, before timing; the other parts as they are."""
-    return [(name, reencode(part) if name.startswith(prefix) else part) for name, part in files]
-
-
-def as_jpeg(files: list, quality: int = 95) -> list:
-    """The request's colour parts re-encoded as JPEG (as a camera would stream them)."""
-    import cv2
-
-    def jpeg(part: tuple) -> tuple:
-        filename, data, _ = part
-        bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
-        data = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])[1].tobytes()
-        return Path(filename).with_suffix(".jpg").name, data, "image/jpeg"
-
-    return _reencoded(files, "color_", jpeg)
-
-
-def as_fast_depth(files: list) -> list:
-    """The request's depth parts re-written losslessly as the renderer now writes depth
-    (``posenet.data.images.DEPTH_PNG_PARAMS``: no filter, zlib level 3): for a dataset rendered before
-    that change, or one whose depth came from elsewhere."""
-    import cv2
-
-    from posenet.data.images import DEPTH_PNG_PARAMS
-
-    def fast(part: tuple) -> tuple:
-        filename, data, mime = part
-        depth = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-        return filename, cv2.imencode(".png", depth, DEPTH_PNG_PARAMS)[1].tobytes(), mime
-
-    return _reencoded(files, "depth_", fast)
 
 
 def post(client: httpx.Client, scene: dict, files: list) -> tuple[float, dict]:
@@ -244,9 +211,7 @@ def run_variant(
     color_format: str = "png",
     depth_format: str = "png",
 ) -> dict:
-    def encode(files: list) -> list:
-        files = as_jpeg(files) if color_format == "jpeg" else files
-        return as_fast_depth(files) if depth_format == "png-fast" else files
+    transport = Transport(color_format, depth_format)
 
     server = Server(env)
     with server as url, httpx.Client(base_url=url, timeout=300) as client:
@@ -255,14 +220,13 @@ def run_variant(
         for persons, index in frames.items():
             sample = ds[index]
             for mode in ("reference_boxes", "detector"):
-                scene, files = (reference_request(sample, root, persons) if mode == "reference_boxes"
-                                else scene_request(sample, root, reference_boxes=False))  # fmt: skip
+                scene, files = (reference_request(sample, root, persons, transport) if mode == "reference_boxes"
+                                else scene_request(sample, root, False, transport))  # fmt: skip
                 result["configs"][f"{persons}p_{mode}"] = {
                     "frame": sample.id,
-                    **measure(client, scene, encode(files), requests),
+                    **measure(client, scene, files, requests),
                 }
-        scene, files = scene_request(ds[frames[3]], root, reference_boxes=False)
-        files = encode(files)
+        scene, files = scene_request(ds[frames[3]], root, False, transport)
         result["throughput_fps"] = {
             str(c): throughput(url, scene, files, c, max(8, requests)) for c in (1, 4)
         }

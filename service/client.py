@@ -13,7 +13,11 @@ with exponential backoff (honouring Retry-After); a frame that still fails is no
 retries it. A frame the server rejects (4xx) is written with its error and counted as a failure.
 
 Image files are sent as they are on disk (no decoding or re-encoding): ``dayD/camC/color/N.png`` and the
-16-bit depth beside it in ``depth/``. With ``--reference-boxes`` the annotated boxes that have a person id are
+16-bit depth beside it in ``depth/``. ``--color-format jpeg`` re-encodes colour as JPEG (``--jpeg-quality``, 95 by
+default: a third of the PNG's bytes, and the server decodes it at the models' resolution by DCT scaling), and
+``--depth-format png-fast`` re-writes depth losslessly with no PNG filter and zlib level 3 (as the renderer
+writes it; faster to decode than a maximally compressed PNG): cheaper transport, at the accuracy cost that
+``docs/service.md`` records for JPEG (depth stays exact). With ``--reference-boxes`` the annotated boxes that have a person id are
 sent with those ids (the paper's reference-box setting, detection skipped). ``--evaluate`` scores the whole
 output file with ``posenet.evaluation.evaluate``; in detector mode each returned person is first given the ground-truth
 id whose boxes it overlaps most (mean IoU over the views, as in the paper; MVOR's box-only people compete).
@@ -39,16 +43,18 @@ import sys
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
+import cv2
 import httpx
+import numpy as np
 from tqdm import tqdm
 
 from posenet.boxes import ground_truth_ids, identified
 from posenet.cli import add_days
-from posenet.data.images import depth_file_name
+from posenet.data.images import DEPTH_PNG_PARAMS, depth_file_name
 from posenet.data.mvor import MvorDataset, load_annotations
 from posenet.data.sample import Sample
 from posenet.evaluation.evaluate import prediction_record
@@ -66,11 +72,51 @@ class ClientConfig:
     retries: int = 8  # 8 doublings from 0.5 s reach the 30 s cap: about 2 minutes of patience per frame
     backoff_s: float = 0.5
     backoff_cap_s: float = 30.0
+    transport: Transport = field(default_factory=lambda: Transport())  # how the images travel
 
 
 # ----------------------------------------------------------------------------------------------- requests
-def scene_request(sample: Sample, root: Path, reference_boxes: bool) -> tuple[dict, list[tuple]]:
-    """The ``scene`` JSON and the file parts of one frame, images read as raw bytes."""
+COLOR_FORMATS = ("png", "jpeg")  # as on disk; JPEG re-encoded at --jpeg-quality
+DEPTH_FORMATS = ("png", "png-fast")  # as on disk; lossless PNG without filter at zlib level 3
+
+
+@dataclass(frozen=True)
+class Transport:
+    """How a frame's images travel: colour as on disk (``png``) or re-encoded as JPEG at ``quality``; depth as on
+    disk or re-written losslessly as ``posenet.data.images.DEPTH_PNG_PARAMS`` (``png-fast``)."""
+
+    color: str = "png"
+    depth: str = "png"
+    quality: int = 95
+
+    def __post_init__(self) -> None:
+        if self.color not in COLOR_FORMATS or self.depth not in DEPTH_FORMATS:
+            raise ValueError(f"colour must be one of {COLOR_FORMATS} and depth one of {DEPTH_FORMATS}")
+        if not 1 <= self.quality <= 100:
+            raise ValueError(f"the JPEG quality must be 1 to 100, got {self.quality}")
+
+    def color_part(self, name: str, data: bytes) -> tuple[str, bytes, str]:
+        """A colour image's file part (``name``: its file name, ``data``: its bytes as read)."""
+        if self.color == "png":
+            return name, data, "image/png"
+        bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.quality])[1].tobytes()
+        return str(Path(name).with_suffix(".jpg")), jpeg, "image/jpeg"
+
+    def depth_part(self, name: str, data: bytes) -> tuple[str, bytes, str]:
+        """A 16-bit depth image's file part."""
+        if self.depth == "png-fast":
+            depth = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+            data = cv2.imencode(".png", depth, DEPTH_PNG_PARAMS)[1].tobytes()
+        return name, data, "image/png"
+
+
+def scene_request(
+    sample: Sample, root: Path, reference_boxes: bool, transport: Transport | None = None
+) -> tuple[dict, list[tuple]]:
+    """The ``scene`` JSON and the file parts of one frame, images read as raw bytes (and re-encoded as
+    ``transport`` says; default: sent as on disk)."""
+    transport = transport or Transport()
     views, files = [], []
     for i, view in enumerate(sample.views):
         cam = view.camera
@@ -90,8 +136,8 @@ def scene_request(sample: Sample, root: Path, reference_boxes: bool) -> tuple[di
         views.append(entry)
         color = root / view.file_name
         depth = root / depth_file_name(view.file_name)
-        files.append((f"color_{i}", (color.name, color.read_bytes(), "image/png")))
-        files.append((f"depth_{i}", (depth.name, depth.read_bytes(), "image/png")))
+        files.append((f"color_{i}", transport.color_part(color.name, color.read_bytes())))
+        files.append((f"depth_{i}", transport.depth_part(depth.name, depth.read_bytes())))
     scene = {"views": views}
     if sample.up is not None:  # the file knows the room: streams leave lying persons untracked
         scene["up"] = sample.up.tolist()
@@ -122,7 +168,7 @@ def post_frame(
 
     Raises the last transient error when the retries are used up (the frame is then not written).
     """
-    scene, files = scene_request(sample, root, cfg.reference_boxes)
+    scene, files = scene_request(sample, root, cfg.reference_boxes, cfg.transport)
     headers = _headers(cfg)
     for attempt in range(cfg.retries + 1):
         t0 = time.perf_counter()
@@ -460,6 +506,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--token", default=os.environ.get("ORPOSE_TOKEN"), help="bearer token (env ORPOSE_TOKEN)"
     )
+    parser.add_argument(
+        "--color-format", choices=COLOR_FORMATS, default="png",
+        help="send colour as on disk (png) or re-encoded as JPEG (about a third of the bytes; default: %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--jpeg-quality", type=int, default=95, help="JPEG quality, 1-100, with --color-format jpeg (default: %(default)s)"
+    )  # fmt: skip
+    parser.add_argument(
+        "--depth-format", choices=DEPTH_FORMATS, default="png",
+        help="send depth as on disk (png) or re-written losslessly without PNG filter at zlib level 3 (png-fast: "
+        "faster for the server to decode; default: %(default)s)",
+    )  # fmt: skip
     track = parser.add_argument_group("tracking (sequences rendered by posenet.synth --sequence)")
     track.add_argument(
         "--track",
@@ -492,6 +550,10 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.concurrency < 1:
         raise SystemExit("--concurrency must be at least 1")
+    try:
+        transport = Transport(args.color_format, args.depth_format, args.jpeg_quality)
+    except ValueError as exc:
+        raise SystemExit(f"--jpeg-quality: {exc}") from None
     if args.annotations is None:  # a recording folder: frames and cameras only, nothing to evaluate against
         from posenet.data.recording import RecordingDataset
 
@@ -511,8 +573,9 @@ def main(argv: list[str] | None = None) -> int:
             )
         sequences = sequence_frames(gt, dataset)
     cfg = ClientConfig(
-        args.url, args.concurrency, args.reference_boxes, args.token, args.timeout, args.retries
-    )
+        args.url, args.concurrency, args.reference_boxes, args.token, args.timeout, args.retries,
+        transport=transport,
+    )  # fmt: skip
     counts = run(dataset, args.dataset, args.out, cfg, sequences)
     new = counts["ok"] + counts["rejected"]
     print(

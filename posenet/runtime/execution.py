@@ -8,8 +8,9 @@ precision is resolved where the model runs, at load time:
   (AVX512-BF16 or AMX, with torch's kernels allowed to use it); float32 everywhere else.
 - ``fp32`` / ``bf16`` force a choice (``--precision`` on the command lines, ``ORPOSE_PRECISION`` for the service).
 - ``int8`` (inference only): both networks quantized for OpenVINO (``posenet.runtime.quantize``), the fastest choice on a
-  CPU without native bf16; torch and ONNX Runtime then compute float32. ``auto`` never picks it: it trades a little
-  accuracy for speed, so a user asks for it.
+  CPU without native bf16; torch and ONNX Runtime then compute float32. On OpenVINO ``auto`` picks it for a graph
+  whose accuracy cost is on record and small, where this machine measures it faster
+  (``posenet.runtime.auto_int8``).
 
 ``machine()`` describes the machine in the terms a speed figure needs (CPU model, cores, torch's CPU capability,
 native bf16, library versions), so that every benchmark can record it beside its numbers.
@@ -44,6 +45,9 @@ class Precision:
 
     name: str
     reason: str
+    auto: bool = (
+        False  # resolved by ``auto``: on OpenVINO, int8 may still be chosen (posenet.runtime.auto_int8)
+    )
 
     @property
     def bf16(self) -> bool:
@@ -122,11 +126,13 @@ def resolve_precision(requested: str | None = "auto", device: str | torch.device
     if requested not in RUN_PRECISIONS:
         raise ValueError(f"precision must be one of {RUN_PRECISIONS}, got {requested!r}")
     if requested == "int8":
-        return Precision("int8", "int8 was asked for: OpenVINO runs quantized graphs (posenet.runtime.quantize)")
+        return Precision(
+            "int8", "int8 was asked for: OpenVINO runs quantized graphs (posenet.runtime.quantize)"
+        )
     if requested != "auto":
         return Precision(requested, f"{requested} was asked for")
     ok, why = native_bf16(device)
-    return Precision("bf16" if ok else "fp32", why)
+    return Precision("bf16" if ok else "fp32", why, auto=True)
 
 
 def default_precision() -> str:

@@ -95,27 +95,45 @@ def load_runner(
     At ``int8`` precision on OpenVINO the graph is quantized (``posenet.runtime.quantize``): ``calibrate(runner)`` runs
     a float32 ``runner`` on the calibration scenes and returns its recorded inputs (called only when the int8
     graph is not cached yet); ``transformer`` selects NNCF's scheme for attention layers. If quantizing fails,
-    the float32 graph runs, and its precision's reason says why."""
+    the float32 graph runs, and its precision's reason says why. At ``auto`` precision on OpenVINO the int8 graph
+    runs where ``posenet.runtime.auto_int8`` finds its cost on record and this machine measures it faster."""
     chosen = resolve_backend(backend, device)
     if chosen.name == "torch":
         return None, chosen
     threads = threads or torch.get_num_threads()
     try:
         graph = export()
+        if precision.auto and not precision.int8 and chosen.name == "openvino" and calibrate is not None:
+            from posenet.runtime.auto_int8 import choose
+
+            runner, precision = choose(
+                graph, threads, precision, functools.partial(OnnxRunner, graph, "openvino", threads, precision),
+                lambda: _int8_runner(graph, threads, calibrate, transformer),
+            )  # fmt: skip
+            return runner, chosen
         if precision.int8 and chosen.name == "openvino":
             try:
-                from posenet.runtime.quantize import quantize_graph
-
-                fp32 = Precision("fp32", "the float32 graph that int8 is calibrated from")
-                float32 = functools.partial(OnnxRunner, graph, "openvino", threads, fp32)
-                return OnnxRunner(quantize_graph(graph, lambda: calibrate(float32()), transformer), "openvino",
-                                  threads, precision), chosen  # fmt: skip
+                return _int8_runner(graph, threads, calibrate, transformer, precision), chosen
             except (Exception, SystemExit) as exc:  # whatever calibration raises, float32 still runs
                 log.warning("int8 quantization failed, running float32: %s", exc)
                 precision = Precision("fp32", f"int8 failed ({type(exc).__name__}: {exc}); float32")
         return OnnxRunner(graph, chosen.name, threads, precision), chosen
     except (Exception, SystemExit) as exc:  # a broken runtime must leave a working (torch) model
         return None, Backend("torch", f"{chosen.name} failed ({type(exc).__name__}: {exc}); using torch")
+
+
+def _int8_runner(
+    graph: Path, threads: int, calibrate, transformer: bool, precision: Precision | None = None
+) -> OnnxRunner:
+    """OpenVINO's runner of the int8 graph of ``graph`` (quantized now unless cached; ``load_runner``'s
+    ``calibrate`` runs the float32 graph on the calibration scenes)."""
+    from posenet.runtime.quantize import quantize_graph
+
+    fp32 = Precision("fp32", "the float32 graph that int8 is calibrated from")
+    float32 = functools.partial(OnnxRunner, graph, "openvino", threads, fp32)
+    precision = precision or Precision("int8", "int8")
+    int8 = quantize_graph(graph, lambda: calibrate(float32()), transformer)
+    return OnnxRunner(int8, "openvino", threads, precision)
 
 
 def graph_key(module: torch.nn.Module, extra: dict) -> str:
