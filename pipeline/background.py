@@ -21,7 +21,8 @@ behind something nearer) lie at least ``margin_mm`` in front of the background. 
 stream's first frame, so whoever is in it is background until they move (the tracker's other two cues).
 
 Cost: the update and the question touch ``V x grid_width x grid_width * H / W`` pixels (3 x 80 x 60 here) and each
-person's torso joints: well under a millisecond per frame (``benchmarks/tracking.py --background-cost``).
+person's torso joints: about a millisecond per frame (``benchmarks/tracking.py --background``, its
+``background_ms_mean``).
 
 Usage::
 
@@ -174,6 +175,7 @@ class DepthBackground:
             self._now = None
             self.depth = self._grids(views).copy()
             self.time = float(timestamp_s)
+            self._now = None
             return
         dt = max(float(timestamp_s) - self.time, 0.0)
         self.time = float(timestamp_s)
@@ -185,6 +187,9 @@ class DepthBackground:
             rate[self._kept(np.asarray(keep, float).reshape(-1, NUM_JOINTS, 3), views) & (now < back)] = 0
         rate[back == 0] = 1.0  # the first known depth of a cell is its background
         back += np.where(known, rate * (now - back), 0)
+        self._now = (
+            None  # no images kept between frames: a stream's state may be stored (service.stream_store)
+        )
 
     def _kept(self, joints: np.ndarray, views: Sequence[SceneView]) -> np.ndarray:
         """``(V, h, w)`` the cells within each person's projected joints' box, grown by ``keep_margin``."""

@@ -47,6 +47,7 @@ Usage::
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -134,9 +135,21 @@ class TrackerConfig:
     # at least pose_height_mm: an upright skeleton the pose network is sure of). Without views nothing changes.
     move_mm: float = 300.0
     foreground_share: float = 0.5
-    pose_spread_mm: float | None = 150.0
+    pose_spread_mm: float | None = 400.0
     pose_height_mm: float = 450.0
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
+    # Identity by the body (issue 46): a multi-view RGB-D rig measures each person's size. A person's signature is
+    # their skeleton's scale against the average adult (frame_scales: the median over bones of length / template,
+    # which also carries the body's width: shoulders and hips), per frame; a track's is the median of its frames'.
+    # signature_mm adds this many mm to the association cost per 1.0 of difference between a person's scale and a
+    # track's with at least signature_min_frames frames (0: off). reid_s: a confirmed track that ended (no
+    # detection for max_coast_s) keeps its id this long for a new track whose scale over its first frames lies
+    # within reid_scale_tol of it, and nearer by reid_margin than any other ended track's (0: off).
+    signature_mm: float = 0.0
+    signature_min_frames: int = 10
+    reid_s: float = 0.0
+    reid_scale_tol: float = 0.05
+    reid_margin: float = 0.03
     # Two persons born in one frame within duplicate_mm of each other are one person that the matcher split: only
     # the one with the lower median spread starts a track (the other is then "near a seen track" from the next frame
     # on, and starts none). Before 2026-12-04 both started one, and both were confirmed: on the tuning
@@ -369,8 +382,11 @@ class Tracker:
         self.origin = np.zeros((0, 3))  # (T, 3) the torso's centre where the track was born
         self.evidence = np.zeros(0, bool)  # seen to move, in front of the background, or in a sure upright pose
         self.background = DepthBackground(c.background)
+        self.background_ms = 0.0  # what the background model took in the last update (part of it)
         self.time: float | None = None
         self.next_id = 0
+        # Ended confirmed tracks whose id may come back (reid_s): id, scale, end time
+        self.ended: list[tuple[int, float, float]] = []
 
     @property
     def num_tracks(self) -> int:
@@ -482,6 +498,55 @@ class Tracker:
             height, spread = _middle(self.recent[..., :2], 1).T  # (T,) each
             return (height < c.lying_height_mm) & (spread > c.lying_spread_mm)
 
+    def _scale(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(T,)`` each track's signature (the median of its frames' scales, NaN without any) and ``(T,)`` how
+        many frames it holds."""
+        return _median(self.scales, 1)
+
+    def _signature_cost(self, joints: np.ndarray) -> np.ndarray | float:
+        """``(T, P)`` mm added to the association cost for the difference between each person's scale and each
+        track's (``signature_mm``; 0 where a track has fewer than ``signature_min_frames`` frames)."""
+        c = self.config
+        if not c.signature_mm or not self.num_tracks or not len(joints):
+            return 0.0
+        scale, count = self._scale()
+        person = frame_scales(bone_lengths(joints))  # (P,)
+        diff = np.abs(scale[:, None] - person[None])  # (T, P)
+        known = (count >= c.signature_min_frames)[:, None] & np.isfinite(diff)
+        return c.signature_mm * np.where(known, diff, 0.0)
+
+    def _name(self, confirm: np.ndarray) -> np.ndarray:
+        """Give the tracks ``confirm (N,)`` their ids: that of an ended track, or of a confirmed one coasting
+        unseen, whose scale theirs matches (``reid_s``), else new ones. Returns ``(T,)`` the coasting tracks whose
+        id a new track took (they end)."""
+        c = self.config
+        taken_over = np.zeros(self.num_tracks, bool)
+        if c.reid_s > 0 and len(confirm):
+            self.ended = [e for e in self.ended if self.time - e[2] <= c.reid_s]
+            scale = self._scale()[0]
+            coasting = np.flatnonzero((self.ids >= 0) & (self.unseen > 0))
+            # (id, scale, coasting track or -1) of every identity a new track may take
+            gallery = [(e[0], e[1], -1) for e in self.ended] + [(int(self.ids[t]), scale[t], t) for t in coasting]
+            for i in confirm:
+                if not gallery or not np.isfinite(scale[i]):
+                    continue
+                d = np.abs(np.array([g[1] for g in gallery]) - scale[i])
+                d[~np.isfinite(d)] = np.inf
+                best = int(np.argmin(d))
+                others = np.delete(d, best)
+                if d[best] <= c.reid_scale_tol and (not len(others) or others.min() - d[best] >= c.reid_margin):
+                    identity, _, track = gallery.pop(best)
+                    self.ids[i] = identity
+                    if track >= 0:
+                        taken_over[track] = True
+                        self.ids[track] = -2  # ends below, its id now another track's
+                    else:
+                        self.ended = [e for e in self.ended if e[0] != identity]
+        new = confirm[self.ids[confirm] < 0]
+        self.ids[new] = np.arange(self.next_id, self.next_id + len(new))
+        self.next_id += len(new)
+        return taken_over
+
     def _seen_alive(self) -> np.ndarray:
         """``(T,)`` the tracks the stream has seen move, stand in front of the background or hold a sure upright
         pose (the phantom rule of :class:`TrackerConfig`), from their state after this frame's update."""
@@ -539,7 +604,7 @@ class Tracker:
                 return np.zeros((0, NUM_JOINTS, 3))
         joints, spread = self._persons(joints, spread)
         usable = self._usable(joints, *self._measures(joints, spread, up))
-        track_of = self._claims(mean_joint_distance(pos, joints), usable)
+        track_of = self._claims(mean_joint_distance(pos, joints) + self._signature_cost(joints), usable)
         return pos[confirmed & ~_taken(track_of, self.num_tracks)]
 
     def update(
@@ -580,10 +645,12 @@ class Tracker:
         unsure = np.zeros(n_dets, bool) if unsure is None else np.asarray(unsure, bool).reshape(n_dets)
         spread_median, height = self._measures(joints, spread, up)  # (P,) each
         usable = self._usable(joints, spread_median, height)  # (P,)
+        t_background = time.perf_counter()
         front = np.full(n_dets, np.nan) if views is None else self.background.foreground(joints, views)  # (P,)
+        self.background_ms = (time.perf_counter() - t_background) * 1e3
         track_of = np.full(n_dets, -1)
         if n_tracks and n_dets:
-            cost = mean_joint_distance(self.pos, joints)  # (T, P)
+            cost = mean_joint_distance(self.pos, joints) + self._signature_cost(joints)  # (T, P)
             track_of = self._claims(cost, usable & ~unsure)  # sure persons first
             if c.unsure_gate_mm is not None and unsure.any():  # then unsure ones, for confirmed tracks left
                 claimed = _taken(track_of, n_tracks)
@@ -622,8 +689,7 @@ class Tracker:
         if views is not None:
             self.evidence |= self._seen_alive()
             confirm &= self.evidence
-        self.ids[confirm] = np.arange(self.next_id, self.next_id + confirm.sum())
-        self.next_id += int(confirm.sum())
+        taken_over = self._name(np.flatnonzero(confirm))
         # 3. bone-length prior and correction, for the tracks seen in this frame
         lengths, slot = bone_lengths(joints[have]), self.frames_seen[rows] % c.bone_history  # (M, B), (M,)
         self.bones[rows, slot] = lengths
@@ -646,8 +712,14 @@ class Tracker:
             else TrackedPerson(int(p), None, joints[p].copy(), joints[p].copy())
             for p in range(n_dets)
         ]  # fmt: skip
-        dead = ((self.ids < 0) & (self.unseen > 0)) | (self.unseen_s > c.max_coast_s)
+        dead = ((self.ids < 0) & (self.unseen > 0)) | (self.unseen_s > c.max_coast_s) | taken_over
+        if c.reid_s > 0 and (dead & (self.ids >= 0)).any():
+            ended = np.flatnonzero(dead & (self.ids >= 0))
+            scale = self._scale()[0][ended]
+            self.ended += [(int(self.ids[i]), float(s), self.time) for i, s in zip(ended, scale, strict=True)]
         self._keep(~dead)
         if views is not None:  # learn the frame's depth, where no confirmed person stands
+            t_background = time.perf_counter()
             self.background.update(views, timestamp_s, self.pos[(self.ids >= 0) & (self.unseen == 0)])
+            self.background_ms += (time.perf_counter() - t_background) * 1e3
         return out

@@ -60,7 +60,8 @@ def test_hota_counts_the_distance_thresholds_a_track_meets():
     truth = walkers(20)
     off = [tracks({0: truth[f, 0] + [0, 110, 0], 1: truth[f, 1] + [0, 0, 110]}) for f in range(20)]
     figures = hota(frames_of(truth), off)
-    assert figures["hota"] == pytest.approx(15 / 19, abs=1e-4) and figures["hota_at_half"] == pytest.approx(1.0)
+    assert figures["hota"] == pytest.approx(15 / 19, abs=1e-4)
+    assert figures["hota_at_half"] == pytest.approx(1.0)
 
 
 def test_a_track_on_nobody_is_a_phantom_with_its_longest_time_and_one_on_an_unannotated_person_is_not():
