@@ -14,6 +14,14 @@ reader's ``subsample=2``):
 - training: seconds per scene for one forward + backward + Adam step, with augmentation, 3 persons;
 - the U-Net's forward FLOPs per person-view and the achieved GFLOP/s of the U-Net forward alone.
 Medians of ``--repeats`` runs after a warm-up. Input data are random (speed does not depend on the content).
+
+``--frame DATA [--index I]`` profiles instead the serving pose stage on one real frame in detector mode (the
+shipped weights, ``auto`` precision and backend, as the service runs them): the boxes per view and how many
+are unsure, how many end in a person, the crops the U-Net runs (x 2 with flips), and the milliseconds of each
+part (crops, the U-Net with its FLOPs and achieved GFLOP/s, lifting, each box's softmax moments, the
+association, the fusion and calibration, the rest: Python between them), at 1 and at ``--threads`` threads::
+
+    python benchmarks/posenet_speed.py --frame data/mvor_altmesh4 --index 2 --threads 2
 """
 
 from __future__ import annotations
@@ -133,6 +141,92 @@ def bench(preset: str, setting: str, repeats: int, persons_list=(1, 3, 6)) -> di
     return row
 
 
+def profile_frame(root, index: int, threads: int, repeats: int) -> dict:
+    """The pose stage of frame ``index`` of the MVOR-format dataset ``root``, part by part (module docstring)."""
+    from pathlib import Path
+
+    from pipeline.skeleton_matching import match_heatmaps, members_of
+    from pipeline.two_stage import ScenePipeline
+    from posenet.data.mvor import MvorDataset
+    from posenet.net.box_poses import slot_layout
+    from posenet.scene import views_of
+
+    torch.set_num_threads(threads)
+    root = Path(root)
+    pipe = ScenePipeline.from_checkpoints(backend="auto", threads=threads)
+    views = views_of(MvorDataset(root, root / "annotations.json")[index])
+    model, cfg = pipe.pose.model, pipe.pose.model.config
+    detected = pipe.detect(views)
+    boxes, candidate = detected.boxes, detected.candidate
+    dense, has, _, _ = slot_layout(boxes)
+    mirrors = (False, True) if cfg.flip_test else (False,)
+    result = pipe.run(views, detected=detected)
+    held = sum(len(k) for p in result.persons for k in p.box_indices)
+    heat = pipe.pose.box_heatmaps(views, boxes)
+    heat.reduce()
+    groups = pipe._match_skeletons(boxes, views, candidate, detected=True)[2]
+    members = members_of(groups, boxes)
+    with torch.inference_mode():
+        scenes = [build_scene(views, dense, has, cfg.inputs, mirror=m) for m in mirrors]
+        flops = model.unet.flops(*scenes[0].images.shape[-2:]) * int(has.sum()) * len(mirrors)
+
+        parts = {
+            "detect (for scale)": lambda: pipe.detect(views),
+            "crops (build_scene)": lambda: [
+                build_scene(views, dense, has, cfg.inputs, mirror=m) for m in mirrors
+            ],
+            "U-Net": lambda: model.heatmaps(scenes),
+            "box heatmaps (crops + U-Net + lifting)": lambda: pipe.pose.box_heatmaps(views, boxes),
+            "softmax moments per box": lambda: [
+                p.__setattr__("_moments", None) or p.moments(heat.eps) for p in heat.passes
+            ],  # fmt: skip
+            "association (match_heatmaps)": lambda: match_heatmaps(
+                heat, views, boxes, pipe._skeleton_config(), candidate=candidate, detected=True
+            ),
+            "fusion + calibration": lambda: pipe.pose.calibration(
+                heat.estimate(members).spread_mm.double(),
+                torch.ones(len(members), dtype=torch.long) * 3,
+                heat.estimate(members).joints.double(),
+            ),  # fmt: skip
+            "run(): match + pose stages": lambda: pipe.run(views, detected=detected),
+        }
+        ms = {name: 1e3 * median_time(fn, repeats) for name, fn in parts.items()}
+    ms["lifting (box heatmaps - crops - U-Net)"] = (
+        ms["box heatmaps (crops + U-Net + lifting)"] - ms["crops (build_scene)"] - ms["U-Net"]
+    )
+    ms["rest: Python between the parts"] = ms["run(): match + pose stages"] - sum(
+        ms[k] for k in ("box heatmaps (crops + U-Net + lifting)", "softmax moments per box",
+                        "association (match_heatmaps)", "fusion + calibration")
+    )  # fmt: skip
+    unsure = int(sum(c.sum() for c in candidate)) if candidate is not None else 0
+    return {
+        "threads": threads,
+        "runtime": f"U-Net {pipe.pose.backend.name} {pipe.pose.precision.name}",
+        "boxes_per_view": [len(b) for b in boxes],
+        "unsure_boxes": unsure,
+        "boxes_in_persons": held,
+        "persons": len(result.persons),
+        "crops_run": int(has.sum()) * len(mirrors),
+        "unet_gflops": round(flops / 1e9, 2),
+        "unet_gflop_per_s": round(flops / 1e9 / (ms["U-Net"] / 1e3), 1),
+        "ms": {k: round(v, 1) for k, v in ms.items()},
+    }
+
+
+def format_profile(rows: list[dict]) -> str:
+    r0 = rows[0]
+    lines = [
+        f"pose stage of one frame, detector mode: boxes per view {r0['boxes_per_view']} ({r0['unsure_boxes']} unsure), "
+        f"{r0['boxes_in_persons']} of them in the {r0['persons']} persons answered; the U-Net runs {r0['crops_run']} "
+        f"crops ({r0['unet_gflops']} GFLOP)",
+        f"{'part (ms, median)':<44}" + "".join(f"{r['threads']:>3} thr {r['runtime']:<22}" for r in rows),
+    ]
+    for k in r0["ms"]:
+        lines.append(f"{k:<44}" + "".join(f"{r['ms'][k]:>32.1f}" for r in rows))
+    lines.append(f"{'U-Net achieved GFLOP/s':<44}" + "".join(f"{r['unet_gflop_per_s']:>32.1f}" for r in rows))
+    return "\n".join(lines)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
@@ -141,7 +235,21 @@ def main() -> None:
     p.add_argument("--settings", nargs="*", default=list(SETTINGS), choices=list(SETTINGS))
     p.add_argument("--persons", type=int, nargs="*", default=[1, 3, 6], help="persons per inference scene")
     p.add_argument("--json", help="also write the rows to this json file")
+    p.add_argument(
+        "--frame", help="profile the serving pose stage on a frame of this MVOR-format dataset instead"
+    )
+    p.add_argument(
+        "--index", type=int, default=2, help="--frame: which frame of the dataset (default: %(default)s)"
+    )
     args = p.parse_args()
+    if args.frame:
+        print(machine_line())
+        rows = [profile_frame(args.frame, args.index, t, args.repeats) for t in sorted({1, args.threads})]
+        print(format_profile(rows))
+        if args.json:
+            with open(args.json, "w") as f:
+                json.dump({"machine": machine_line(), "rows": rows}, f, indent=2)
+        return
     torch.set_num_threads(args.threads)
     print(machine_line())
     rows = []

@@ -12,7 +12,9 @@ requests and the server's per-stage breakdown (decode, detect, match, pose, enco
 concurrency 1 and 4 (detector on, 3-person frame), and the server's peak RSS. ``--out`` also writes JSON.
 
 ``--variants`` compares ways of running the same weights side by side in one run, one server each:
-``torch-bf16`` (torch with bf16 forced: what the shipped configs did before precision became ``auto``),
+``default`` (the shipped settings: backend and precision ``auto``), ``default-jpeg`` (the same server, colour
+sent as JPEG q95 and depth as fast PNG), ``torch-bf16`` (torch with bf16 forced: what the shipped configs did
+before precision became ``auto``),
 ``torch`` (precision ``auto``), ``onnxruntime`` and ``openvino``. Each variant's machine line comes from the
 server's ``/model``. To see an AVX2-only CPU on a newer one, cap torch's instruction sets (the runtimes are
 not capped by these)::
@@ -48,12 +50,16 @@ from service.client import Transport, scene_request  # noqa: E402
 MVOR_JSON = REPO.parent / "shared" / "mvor" / "camma_mvor_2018.json"
 STAGES = ("decode", "detect", "match", "pose", "encode", "total")
 VARIANTS = {  # name: the server's environment
+    "default": {},  # the settings as shipped: backend auto, precision auto (int8 where auto_int8 measures it)
     "torch-bf16": {"ORPOSE_BACKEND": "torch", "ORPOSE_PRECISION": "bf16"},
     "torch": {"ORPOSE_BACKEND": "torch", "ORPOSE_PRECISION": "auto"},
     "onnxruntime": {"ORPOSE_BACKEND": "onnxruntime", "ORPOSE_PRECISION": "auto"},
     "openvino": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "auto"},
     "openvino-int8": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "int8"},
+    "default-jpeg": {},  # the default server; colour sent as JPEG q95 and depth as fast PNG
 }
+# Variants that send the images otherwise than --color-format / --depth-format say (service.client.Transport).
+TRANSPORTS = {"default-jpeg": ("jpeg", "png-fast")}
 
 
 def render_twin(folder: Path, annotations: Path, frames: int) -> Path:
@@ -194,12 +200,36 @@ def main(argv: list[str] | None = None) -> dict:
             env.update({k: str(v) for k, v in (("ORPOSE_POSE_CHECKPOINT", pose),
                                                 ("ORPOSE_DETECTOR_CHECKPOINT", det)) if v})  # fmt: skip
             results["variants"][variant] = run_variant(
-                env, ds, root, frames, args.requests, args.color_format, args.depth_format
+                env,
+                ds,
+                root,
+                frames,
+                args.requests,
+                *TRANSPORTS.get(variant, (args.color_format, args.depth_format)),
             )
             print(format_variant(variant, results["variants"][variant]), flush=True)
+    print(side_by_side(results["variants"]))
     if args.out:
         args.out.write_text(json.dumps(results, indent=2))
     return results
+
+
+def side_by_side(variants: dict, config: str = "3p_detector") -> str:
+    """The variants' ``config`` rows in one table: client p50 / p95 and the server's stages (p50 ms)."""
+    head = f"{'variant (' + config + ')':<28}{'runtime':<34}{'p50 ms':>8}{'p95 ms':>8}" + "".join(
+        f"{s:>9}" for s in STAGES
+    )
+    lines = [head, "-" * len(head)]
+    for name, r in variants.items():
+        c = r["configs"][config]
+        runtime = ", ".join(
+            f"{x['network'][:3]} {x['backend'][:8]} {x['precision']}" for x in r["model"]["runtime"]
+        )
+        lines.append(
+            f"{name:<28}{runtime:<34}{c['latency_ms']['p50']:>8.1f}{c['latency_ms']['p95']:>8.1f}"
+            + "".join(f"{c['stages_ms_p50'][s]:>9.1f}" for s in STAGES)
+        )
+    return "\n".join(lines)
 
 
 def run_variant(
