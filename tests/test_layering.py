@@ -13,6 +13,12 @@ MAY_IMPORT = {
     "pipeline": {"pipeline", "detector", "posenet"},
     "service": {"service", "pipeline", "detector", "posenet"},
 }
+# Modules allowed one import beyond their package's rule, each with its reason.
+EXCEPTIONS = {
+    # The training CLI that adapts the detector from unlabelled video needs the cross-view matcher for its
+    # pseudo-labels (pipeline.pseudo_boxes); the detector that the pipeline runs never imports pipeline.
+    "detector/adapt.py": {"pipeline"},
+}
 
 
 def imported(path) -> list[str]:
@@ -31,6 +37,8 @@ def test_no_import_goes_the_wrong_way(package):
         f"{path.relative_to(REPO_ROOT)} imports {name}"
         for path in sorted((REPO_ROOT / package).rglob("*.py"))
         for name in imported(path)
-        if name.split(".")[0] in MAY_IMPORT and name.split(".")[0] not in MAY_IMPORT[package]
+        if name.split(".")[0] in MAY_IMPORT
+        and name.split(".")[0]
+        not in MAY_IMPORT[package] | EXCEPTIONS.get(str(path.relative_to(REPO_ROOT)), set())
     ]
     assert not wrong, "\n".join(wrong)
