@@ -5,9 +5,10 @@ frame goes through the same form reading, validation and pipeline as ``POST /sce
 (``service.routes.scene_result``); then the stream's tracker links its persons to tracks, and the response
 adds a ``track_id`` and the smoothed joints to every person.
 
-- **Order.** Each frame must be later than the last one the stream took or is taking: an older or equal time is
-  a 409 that says what was expected. A rejected frame (4xx) leaves the stream as it was; a stream whose first
-  frame is rejected is not started.
+- **Order.** Each frame must be later than the last one the stream took: an older or equal time is a 409 that says
+  what was expected. A frame later than that but not later than one the stream is taking now (sent before it, it
+  was overtaken on the way in) is answered as dropped. A rejected frame (4xx) leaves the stream as it was; a
+  stream whose first frame is rejected is not started.
 - **Two stages that overlap.** A frame goes through two :class:`Turn` s of its stream, each one frame at a time
   in arrival order: the *front* (decoding, validation and the detector, on the app's front worker) and the
   *pose* stage (grouping, the pose network, the tracker's update, on the inference worker). So frame t+1 is
@@ -306,6 +307,15 @@ class StreamRegistry:
         try:
             clock = "server" if timestamp_s is None else "client"
             time_s, origin = _frame_time(stream, clock, timestamp_s, received)
+            newer = max((f.time for f in stream.taking), default=-math.inf)
+            if time_s <= newer:  # overtaken on the way in by a later frame: it can never be taken
+                yield Frame(stream, time_s, clock, received, origin=origin, superseded=Dropped(
+                    f"this frame (at {time_s:.3f} s) arrived after a later frame of its stream (at {newer:.3f} s), "
+                    "which the stream is already taking: frames sent this close together can overtake each other "
+                    "on the way, and a stream takes its frames in time order",
+                    newer,
+                ))  # fmt: skip
+                return
             taken = Frame(stream, time_s, clock, received, self.floor_up, self.unsure, origin=origin)
             stream.taking.append(taken)
             yield taken
@@ -324,11 +334,11 @@ def _frame_time(
     stream: Stream, clock: str, timestamp_s: float | None, received: float
 ) -> tuple[float, float]:
     """The frame's time on the stream's clock and that clock's origin (the server clock's: the first frame's
-    receive time); 409 unless it is later than every frame the stream took or is taking."""
+    receive time); 409 unless it is later than the last frame the stream took (a frame older than one it is taking
+    is answered as dropped instead: :meth:`StreamRegistry.frame`)."""
     first = stream.taking[0] if stream.clock is None and stream.taking else None
     fixed, origin = (stream.clock, stream.origin) if first is None else (first.clock, first.origin)
-    last = max([f.time for f in stream.taking] + ([stream.last_time] if stream.clock is not None else []),
-               default=None)  # fmt: skip
+    last = stream.last_time if stream.clock is not None else -math.inf
     if fixed is None:  # the first frame: it fixes the clock once it is taken (Frame.answer)
         return (0.0, received) if timestamp_s is None else (timestamp_s, 0.0)
     sid = stream.id
@@ -376,11 +386,14 @@ class Frame:
     floor_ms: float = 0.0  # what that look cost
     origin: float = 0.0  # the server clock's origin this frame's time counts from (registry clock)
     waited_ms: float = 0.0  # waiting for the stream's turns (front and pose)
+    superseded: Dropped | None = None  # it arrived after a later frame of the stream: it is dropped at once
 
     @asynccontextmanager
     async def turn(self, stage: str) -> AsyncIterator[None]:
         """Hold the stream's ``stage`` ("front" or "pose") for this frame; raises :class:`Dropped` when a newer
-        frame took this one's place while it waited (module docstring)."""
+        frame took this one's place while it waited, or arrived before this one (module docstring)."""
+        if self.superseded is not None:
+            raise self.superseded
         async with getattr(self.stream, stage).take(self.time) as waited_ms:
             self.waited_ms += waited_ms
             yield
