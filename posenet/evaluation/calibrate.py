@@ -1,13 +1,16 @@
 """Fit the calibrated per-joint confidence of a pose checkpoint (``posenet.net.calibration``) and report it.
 
-Usage (the shipped weights; the fit data is rendered with seeds no training run used: procedural scenes and the
-tracking tuning sequences, whose OR-like motions make it calibrated on MVOR's poses; docs/MODEL_CARD.md)::
+Usage (the shipped weights since 2026-12-06; the fit data is rendered in the training look family with seeds no
+training run used: procedural scenes and sequences on MVOR's rig and on random rigs, with and without mesh bodies;
+docs/MODEL_CARD.md)::
 
-    python -m posenet.synth --out data/calib_rand --scenes 60 --rig mvor --look random --seed 99 --workers 1
-    python -m posenet.synth --out data/calib_twinlook --scenes 60 --rig mvor --look twin --seed 99 --workers 1
-    python -m posenet.evaluation.calibrate --data data/calib_rand --data data/calib_twinlook --data data/seq_tune \\
-        --data data/seq_t3 ... --data data/seq_t9 --cache runs/calib_cache \\
-        --test data/mvor_twin:4 --test data/mvor_alt:4 --plot docs/img/calibration.png --write
+    python -m posenet.synth --out data/calib_rr_mesh --scenes 120 --rig random --look random --mesh-share 0.5 \
+        --seed 151 --workers 1
+    python -m posenet.synth --out data/calib_seq_rr_rand --sequence --frames 120 --persons 3 --rig random \
+        --look random --seed 156 --workers 1   # ... and the four others of the model card
+    python -m posenet.evaluation.calibrate --data data/calib_rr_mesh ... --data data/calib_seq_rr_rand \
+        --cache runs/calibrate_cache --test data/mvor_alt4:4 --test data/mvor_altmesh4:4 --test data/rig77_alt \
+        --plot docs/img/calibration.png --write
 
 It predicts every annotated person of the ``--data`` sets (``DIR[:DAY,DAY...]``, pooled) with its reference
 boxes, measures each joint's 3D error, fits P(error <= ``--radius-mm``) from the spread, the joint type and the number of supporting views,
@@ -105,6 +108,9 @@ def served(data: Path, days: list[int] | None, predictions: Path) -> dict:
     file ``predictions`` holds (the records of ``posenet.evaluation.evaluate.prediction_record``)."""
     from posenet.data.mvor import load_annotations
 
+    if not predictions.is_file():
+        raise SystemExit(f"error: no prediction file at {predictions} (benchmarks/detector_mode.py --predictions DIR "
+                         "writes DIR/NAME.json)")  # fmt: skip
     records = json.loads(predictions.read_text())
     if not records or any("confidence" not in r for r in records):
         raise SystemExit(f"error: {predictions} holds predictions without a 'confidence' per joint")

