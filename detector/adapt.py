@@ -74,6 +74,9 @@ class DetectorAdaptConfig:
     grad_clip: float = 0.5  # detector.train's cpu preset
     warmup: float = 0.05
     decay_start: float = 0.5
+    # Frames labelled by the teacher at a time, then trained on: the teacher's labels stay fresh, and a time budget
+    # or an interruption loses at most one round (a checkpoint follows each)
+    frames_per_round: int = 64
     target_per_step: int = 4  # target views (pseudo-labelled) per step
     source_per_step: int = 4  # labelled rendered views per step
     ema: float = 0.99  # teacher momentum per step: it averages the student over ~100 steps
@@ -96,17 +99,22 @@ class DetectorAdaptConfig:
 
 # ----------------------------------------------------------------------------- pseudo-labels
 def label_target(
-    teacher: PersonDetector, target: TargetFrames, cfg: DetectorAdaptConfig, progress: bool = True
+    teacher: PersonDetector,
+    target: TargetFrames,
+    frames: list[int],
+    cfg: DetectorAdaptConfig,
+    progress: bool = True,
 ) -> dict[str, int]:
-    """Set every target record's ``boxes`` to this round's pseudo-labels; return the boxes by kind."""
-    dets = []
-    for frame in tqdm(target.frames, desc="teacher", unit="frame", leave=False, disable=not progress):
-        out = teacher.detect(
-            [r.color for r in frame.records], [r.depth for r in frame.records], cfg.pseudo.low
-        )
-        dets.append(out)
+    """Set the records' ``boxes`` of the target ``frames`` to the teacher's pseudo-labels (the teacher also runs
+    on their neighbouring frames, which confirm boxes over time); return the boxes by kind."""
+    needed = sorted({j for i in frames for j in (i, *target.neighbours(i))})
+    dets = {}
+    for i in tqdm(needed, desc="teacher", unit="frame", leave=False, disable=not progress):
+        records = target.frames[i].records
+        dets[i] = teacher.detect([r.color for r in records], [r.depth for r in records], cfg.pseudo.low)
     counts: dict[str, int] = {}
-    for i, frame in enumerate(target.frames):
+    for i in frames:
+        frame = target.frames[i]
         V = len(frame.records)
         near = [[dets[j][v].boxes for j in target.neighbours(i)] for v in range(V)]
         backgrounds = None
@@ -125,31 +133,41 @@ def label_target(
             rec.boxes = boxes
         for k, n in result.counts.items():
             counts[k] = counts.get(k, 0) + n
-    counts["views"] = sum(len(f.records) for f in target.frames)
-    counts["boxes"] = sum(len(r.boxes) for f in target.frames for r in f.records)
+    counts["views"] = sum(len(target.frames[i].records) for i in frames)
+    counts["boxes"] = sum(len(r.boxes) for i in frames for r in target.frames[i].records)
     return counts
+
+
+def rounds(num_frames: int, size: int, seed: int) -> list[list[int]]:
+    """An epoch's rounds: runs of ``size`` consecutive frames (neighbours confirm each other), in a seeded order."""
+    runs = [list(range(i, min(i + size, num_frames))) for i in range(0, num_frames, size)]
+    order = torch.randperm(len(runs), generator=torch.Generator().manual_seed(seed)).tolist()
+    return [runs[i] for i in order]
 
 
 # ----------------------------------------------------------------------------- the run
 class Draw:
-    """Items of a dataset in a seeded order that restarts from the seed every epoch (a resumed run draws what an
-    uninterrupted one would), cycling when a step asks for more than are left."""
+    """Items of a dataset (or of a subset of its indices) in a seeded order, cycling when a step asks for more than
+    are left; a resumed run draws what an uninterrupted one would."""
 
     def __init__(self, dataset) -> None:
         self.dataset = dataset
+        self.indices: list[int] = list(range(len(dataset)))
         self.order: list[int] = []
         self.generator = torch.Generator()
 
-    def restart(self, seed: int) -> None:
+    def restart(self, seed: int, indices: list[int] | None = None) -> None:
         self.generator.manual_seed(seed)
         self.dataset.rng = np.random.default_rng(seed)  # the augmentation's stream
+        self.indices = list(range(len(self.dataset))) if indices is None else indices
         self.order = []
 
     def take(self, n: int) -> list:
         out = []
-        while len(out) < n and len(self.dataset):
+        while len(out) < n and self.indices:
             if not self.order:
-                self.order = torch.randperm(len(self.dataset), generator=self.generator).tolist()
+                perm = torch.randperm(len(self.indices), generator=self.generator).tolist()
+                self.order = [self.indices[i] for i in perm]
             out.append(self.dataset[self.order.pop()])
         return out
 
@@ -199,15 +217,18 @@ def adapt(cfg: DetectorAdaptConfig) -> dict:
     groups = param_groups(student, cfg.lr, cfg.backbone_lr, cfg.weight_decay)
     base_lrs = [g["lr"] for g in groups]
     optimiser = torch.optim.AdamW(groups, lr=cfg.lr, weight_decay=cfg.weight_decay)
-    steps_per_epoch = -(-len(target_set) // cfg.target_per_step)
+    steps_per_epoch = -(
+        -len(target_set) // cfg.target_per_step
+    )  # the rounds' steps: one per target_per_step views
     schedule = Schedule(cfg.lr, cfg.epochs * steps_per_epoch, cfg.decay_start, cfg.warmup, cfg.minutes)
     teacher_model = copy.deepcopy(student).eval().requires_grad_(False)
-    start_epoch = 0
+    start_epoch = start_round = 0
     if resume:
         state = torch.load(state_file, map_location="cpu", weights_only=False)
         student.load_state_dict(state["student"])
         optimiser.load_state_dict(state["optimiser"])
         start_epoch, schedule.step, schedule.elapsed = state["epoch"], state["step"], state["elapsed_s"]
+        start_round = state["round"]
         print(f"resuming {out} at epoch {start_epoch}", file=sys.stderr)
     else:
         schedule.elapsed = time.perf_counter() - t_start  # reading the target counts against --minutes
@@ -238,74 +259,89 @@ def adapt(cfg: DetectorAdaptConfig) -> dict:
     (out / "config.json").write_text(json.dumps(config, indent=2, default=str))
 
     history = []
+    view_index, first = {}, 0  # frame -> its views' indices in target_set
+    for i, frame in enumerate(target.frames):
+        view_index[i] = list(range(first, first + len(frame.records)))
+        first += len(frame.records)
     epochs = cfg.epochs if cfg.minutes is None else 10**9  # with a budget, as many epochs as the time allows
     for epoch in range(start_epoch, epochs):
         if schedule.spent:
             break
-        t0 = time.perf_counter()
-        counts = label_target(teacher, target, cfg, cfg.progress)
-        schedule.elapsed += time.perf_counter() - t0
-        seed = cfg.seed * 100003 + epoch * 1009
-        target_draw.restart(seed)
-        source_draw.restart(seed + 17)
-        desc = f"adapt {epoch + 1}" + (f"/{cfg.epochs}" if cfg.minutes is None else f", {cfg.minutes:g} min")
-        bar = tqdm(range(steps_per_epoch), desc=desc, leave=False, disable=not cfg.progress)
-        sums: dict[str, float] = {}
-        steps = 0
-        student.train()
-        for _ in bar:
-            items = target_draw.take(cfg.target_per_step) + source_draw.take(cfg.source_per_step)
-            batch = collate(items, det_cfg.pad_multiple)
-            lr = schedule.begin(optimiser)
-            for g, base in zip(optimiser.param_groups, base_lrs, strict=True):
-                g["lr"] = base * lr / cfg.lr  # the schedule's factor on each group's own rate
-            output = student(
-                pixel_values=batch["pixel_values"], pixel_mask=batch["pixel_mask"], labels=batch["labels"]
-            )
-            optimiser.zero_grad(set_to_none=True)
-            output.loss.backward()
-            if cfg.grad_clip:
-                torch.nn.utils.clip_grad_norm_(student.parameters(), cfg.grad_clip)
-            optimiser.step()
-            ema_update(teacher.model, student, cfg.ema)
-            schedule.end()
-            steps += 1
-            sums["loss"] = sums.get("loss", 0.0) + float(output.loss.detach())
-            bar.set_postfix(
-                loss=f"{sums['loss'] / steps:.3f}", lr=f"{lr:.1e}", min=f"{schedule.elapsed / 60:.1f}"
-            )
+        plan = rounds(len(target), cfg.frames_per_round, cfg.seed * 100003 + epoch * 1009)
+        for r, frames in enumerate(plan):
+            if epoch == start_epoch and r < start_round:
+                continue  # done before the run was interrupted
             if schedule.spent:
                 break
-        record = {
-            "epoch": epoch + 1,
-            "loss": round(sums.get("loss", 0.0) / max(steps, 1), 4),
-            "pseudo": counts,
-            "steps": schedule.step,
-            "seconds": round(time.perf_counter() - t0, 1),
-            "minutes": round(schedule.elapsed / 60.0, 2),
-        }
-        train_state = {
-            "epoch": epoch + 1,
-            "student": _state_of(student),
-            "optimiser": optimiser.state_dict(),
-            "step": schedule.step,
-            "elapsed_s": schedule.elapsed,
-        }
-        progress = {"epoch": epoch + 1, "step": schedule.step, "metrics": record}
-        save_checkpoint(
-            out / "last",
-            teacher.model,
-            det_cfg,
-            config["train"],
-            progress,
-            "float32",
-            trained_on,
-            train_state,
-        )
-        with open(out / "log.jsonl", "a") as f:
-            f.write(json.dumps(record) + "\n")
-        print(json.dumps(record), file=sys.stderr)
-        history.append(record)
+            t0 = time.perf_counter()
+            counts = label_target(teacher, target, frames, cfg, cfg.progress)
+            schedule.elapsed += time.perf_counter() - t0
+            seed = cfg.seed * 100003 + epoch * 1009 + r * 7919
+            views = [j for i in frames for j in view_index[i]]
+            target_draw.restart(seed, views)
+            source_draw.restart(seed + 17)
+            steps_this = -(-len(views) // cfg.target_per_step)
+            desc = f"epoch {epoch + 1} round {r + 1}/{len(plan)}"
+            bar = tqdm(range(steps_this), desc=desc, leave=False, disable=not cfg.progress)
+            loss_sum, steps = 0.0, 0
+            student.train()
+            for _ in bar:
+                items = target_draw.take(cfg.target_per_step) + source_draw.take(cfg.source_per_step)
+                batch = collate(items, det_cfg.pad_multiple)
+                lr = schedule.begin(optimiser)
+                for g, base in zip(optimiser.param_groups, base_lrs, strict=True):
+                    g["lr"] = base * lr / cfg.lr  # the schedule's factor on each group's own rate
+                output = student(
+                    pixel_values=batch["pixel_values"], pixel_mask=batch["pixel_mask"], labels=batch["labels"]
+                )
+                optimiser.zero_grad(set_to_none=True)
+                output.loss.backward()
+                if cfg.grad_clip:
+                    torch.nn.utils.clip_grad_norm_(student.parameters(), cfg.grad_clip)
+                optimiser.step()
+                ema_update(teacher.model, student, cfg.ema)
+                schedule.end()
+                steps += 1
+                loss_sum += float(output.loss.detach())
+                bar.set_postfix(
+                    loss=f"{loss_sum / steps:.3f}", lr=f"{lr:.1e}", min=f"{schedule.elapsed / 60:.1f}"
+                )
+                if schedule.spent:
+                    break
+            done_epoch, done_round = (epoch + 1, 0) if r + 1 == len(plan) else (epoch, r + 1)
+            record = {
+                "epoch": epoch + 1,
+                "round": r + 1,
+                "rounds": len(plan),
+                "loss": round(loss_sum / max(steps, 1), 4),
+                "pseudo": counts,
+                "steps": schedule.step,
+                "seconds": round(time.perf_counter() - t0, 1),
+                "minutes": round(schedule.elapsed / 60.0, 2),
+            }
+            train_state = {
+                "epoch": done_epoch,
+                "round": done_round,
+                "student": _state_of(student),
+                "optimiser": optimiser.state_dict(),
+                "step": schedule.step,
+                "elapsed_s": schedule.elapsed,
+            }
+            progress = {"epoch": done_epoch, "round": done_round, "step": schedule.step, "metrics": record}
+            save_checkpoint(
+                out / "last",
+                teacher.model,
+                det_cfg,
+                config["train"],
+                progress,
+                "float32",
+                trained_on,
+                train_state,
+            )
+            with open(out / "log.jsonl", "a") as f:
+                f.write(json.dumps(record) + "\n")
+            print(json.dumps(record), file=sys.stderr)
+            history.append(record)
     return {"history": history}
 
 
@@ -366,6 +402,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--warmup", type=float, default=d.warmup, help="fraction with a linear LR warm-up")
     g.add_argument(
         "--decay-start", type=float, default=d.decay_start, help="fraction after which the LR decays"
+    )
+    g.add_argument(
+        "--frames-per-round", type=int, default=d.frames_per_round, help="frames the teacher labels at a time"
     )
     g.add_argument("--target-per-step", type=int, default=d.target_per_step, help="target views per step")
     g.add_argument("--source-per-step", type=int, default=d.source_per_step, help="labelled views per step")

@@ -32,6 +32,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "detector-train": ("detector.train", "train the person detector"),
     "detector-predict": ("detector.predict", "person boxes of a dataset's views"),
     "detector-evaluate": ("detector.evaluate", "COCO AP of predicted boxes"),
+    "detector-adapt": ("detector.adapt", "adapt the person detector to an OR's unlabelled recordings"),
     "detector-export": ("detector.export", "ship a detector run: NMS, score threshold, int8 weights"),
     "group": ("pipeline.group", "detect and group boxes across views (the input of adapt --boxes detector)"),
     "associate": ("pipeline.association", "evaluate the cross-view association of boxes"),
