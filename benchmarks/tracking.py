@@ -29,7 +29,7 @@ import argparse
 import json
 import time
 from collections import defaultdict
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -150,6 +150,33 @@ def tracker_config(overrides: list[str]) -> TrackerConfig:
             except ValueError:
                 raise ValueError(f"--set {item}: {key} takes a number") from None
     return config
+
+
+# The cues of issue 46, one configuration per row of --ablation: (name, gives the tracker views, --set overrides).
+# "signature" weighs the body's scale in the association cost, "re-id" lets a new track take an ended or coasting
+# track's id by it (TrackerConfig.signature_mm, reid_s).
+ABLATION = (
+    ("as before (no views)", False, []),
+    ("+ background rule", True, []),
+    ("+ background + signature cost", True, ["signature_mm=300"]),
+    ("+ background + re-id", True, ["reid_s=60"]),
+    ("+ background + signature + re-id", True, ["signature_mm=300", "reid_s=60"]),
+)
+
+
+def ablation(rows: list, views: dict, base: list[str]) -> list[dict]:
+    """One row of figures per configuration of :data:`ABLATION` (each on top of the ``--set`` overrides ``base``)
+    over one sequence's ``rows`` ((frame id, frame) pairs); ``views`` by frame id."""
+    out = []
+    for name, with_views, sets in ABLATION:
+        frames = [replace(f, views=views[i] if with_views else None) for i, f in rows]
+        figures = evaluate(frames, Tracker(tracker_config(base + sets)))
+        out.append({"cues": name, **{k: figures[k] for k in ABLATION_FIGURES if k in figures}})
+    return out
+
+
+ABLATION_FIGURES = ("idf1", "hota", "mota", "id_switches", "switches_per_1000", "misses", "false_positives",
+                    "phantom_tracks", "longest_on_nobody_s", "track_ms_mean", "background_ms_mean")  # fmt: skip
 
 
 def depth_views(data: Path, gt: dict) -> dict[str, list]:
@@ -295,6 +322,9 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a TrackerConfig field (offline tracking), e.g. --set max_spread_mm=500, or of its "
                    "background model, e.g. --set background.margin_mm=200")  # fmt: skip
+    p.add_argument("--ablation", action="store_true",
+                   help="instead of one configuration, compare the cues of issue 46 side by side (offline tracking): "
+                   "as before, + the background rule, + the body signature in the cost, + re-identification")  # fmt: skip
     p.add_argument("--background", action="store_true",
                    help="give the tracker each frame's depth images and cameras (offline tracking), as a stream "
                    "does: it learns the room's static depth and confirms no track on what never moved "
@@ -336,8 +366,14 @@ def main(argv: list[str] | None = None) -> dict:
         seconds = [r["seconds"] for r in detections.values()]
         report["pipeline_seconds_per_frame"] = round(float(np.mean(seconds)), 3)
         report["background"] = args.background
-        views = depth_views(args.data, gt) if args.background else {}
+        views = depth_views(args.data, gt) if args.background or args.ablation else {}
         for seq, rows in sequences(gt, detections).items():
+            if args.ablation:
+                report.setdefault("ablation", {})[seq] = table = ablation(rows, views, args.set)
+                print(f"sequence {seq}: " + " | ".join(ABLATION_FIGURES))
+                for row in table:
+                    print(f"  {row['cues']:<34} " + " | ".join(str(row.get(k, "-")) for k in ABLATION_FIGURES))
+                continue
             for frame_id, frame in rows:
                 frame.views = views.get(frame_id)
             report["sequences"][seq] = evaluate([f for _, f in rows], Tracker(config))

@@ -135,6 +135,11 @@ class TrackerConfig:
     # at least pose_height_mm: an upright skeleton the pose network is sure of). Without views nothing changes.
     move_mm: float = 300.0
     foreground_share: float = 0.5
+    # The same cues keep a confirmed track: one whose person shows none of them for park_s (its detections all
+    # behind the background's margin, a torso that stays within move_mm, no sure upright pose), as when a track
+    # passes from its person to the draped table, ends (None: never). Half the 1 s that issue 46 allows a track on
+    # nobody; a confirmed person standing still stays in front of the background (its pixels are never absorbed).
+    park_s: float | None = 0.5
     pose_spread_mm: float | None = 400.0
     pose_height_mm: float = 450.0
     background: BackgroundConfig = field(default_factory=BackgroundConfig)
@@ -359,7 +364,7 @@ class Tracker:
     # the per-track arrays, first axis T
     _PER_TRACK = (
         "pos", "vel", "cov", "ids", "hits", "unseen_s", "unseen", "bones", "scales", "frames_seen", "recent",
-        "origin", "evidence",
+        "origin", "evidence", "static_s",
     )  # fmt: skip
 
     def __init__(self, config: TrackerConfig | None = None) -> None:
@@ -379,8 +384,9 @@ class Tracker:
         # (T, birth_hits, 3): height along up (NaN without an up), median spread and share of the torso in front of
         # the background (NaN without views) of its last frames, by frames_seen
         self.recent = np.zeros((0, c.birth_hits, 3))
-        self.origin = np.zeros((0, 3))  # (T, 3) the torso's centre where the track was born
+        self.origin = np.zeros((0, 3))  # (T, 3) the torso's centre at birth, or when last seen alive
         self.evidence = np.zeros(0, bool)  # seen to move, in front of the background, or in a sure upright pose
+        self.static_s = np.zeros(0)  # (T,) seconds seen without any of those cues since (the park rule)
         self.background = DepthBackground(c.background)
         self.background_ms = 0.0  # what the background model took in the last update (part of it)
         self.time: float | None = None
@@ -447,6 +453,7 @@ class Tracker:
         self.recent = np.concatenate([self.recent, np.full((n, c.birth_hits, 3), np.nan)])
         self.origin = np.concatenate([self.origin, joints[:, TORSO].mean(1)])
         self.evidence = np.concatenate([self.evidence, np.zeros(n, bool)])
+        self.static_s = np.concatenate([self.static_s, np.zeros(n)])
 
     @staticmethod
     def _persons(joints, spread) -> tuple[np.ndarray, np.ndarray]:
@@ -558,6 +565,24 @@ class Tracker:
                 height < c.pose_height_mm
             )
             return moved | (front >= c.foreground_share) | posed
+
+    def _park(
+        self, rows: np.ndarray, spread: np.ndarray, height: np.ndarray, front: np.ndarray, dt: float
+    ) -> np.ndarray:
+        """``(T,)`` the confirmed tracks that showed no sign of life for ``park_s`` (:class:`TrackerConfig`), from
+        this frame's persons of the tracks ``rows (M,)``: their median ``spread``, ``height`` along up and share
+        ``front`` in front of the background (NaN: no view saw the torso, which counts as alive). A track alive in
+        this frame starts a new still period from where it is."""
+        c = self.config
+        centre = self.pos[rows][:, TORSO].mean(1)  # (M, 3)
+        with np.errstate(invalid="ignore"):
+            posed = (spread <= c.pose_spread_mm) & ~(height < c.pose_height_mm) if c.pose_spread_mm else False
+            alive = ~(front < c.foreground_share) | posed | (_norm(centre - self.origin[rows]) > c.move_mm)
+        self.origin[rows[alive]] = centre[alive]
+        self.static_s[rows] = np.where(alive, 0.0, self.static_s[rows] + dt)
+        if c.park_s is None:
+            return np.zeros(self.num_tracks, bool)
+        return (self.ids >= 0) & (self.static_s > c.park_s)
 
     def _claims(self, cost: np.ndarray, eligible: np.ndarray) -> np.ndarray:
         """``(P,)`` the track each of the ``eligible`` persons takes (-1: none): optimal assignment on ``cost (T,
@@ -686,9 +711,11 @@ class Tracker:
             [height[have], spread_median[have], front[have]], axis=-1
         )
         confirm = (self.ids < 0) & (self.hits >= c.birth_hits) & ~self._lying()
+        parked = np.zeros(self.num_tracks, bool)
         if views is not None:
             self.evidence |= self._seen_alive()
             confirm &= self.evidence
+            parked = self._park(rows, spread_median[have], height[have], front[have], dt)
         taken_over = self._name(np.flatnonzero(confirm))
         # 3. bone-length prior and correction, for the tracks seen in this frame
         lengths, slot = bone_lengths(joints[have]), self.frames_seen[rows] % c.bone_history  # (M, B), (M,)
@@ -712,7 +739,7 @@ class Tracker:
             else TrackedPerson(int(p), None, joints[p].copy(), joints[p].copy())
             for p in range(n_dets)
         ]  # fmt: skip
-        dead = ((self.ids < 0) & (self.unseen > 0)) | (self.unseen_s > c.max_coast_s) | taken_over
+        dead = ((self.ids < 0) & (self.unseen > 0)) | (self.unseen_s > c.max_coast_s) | taken_over | parked
         if c.reid_s > 0 and (dead & (self.ids >= 0)).any():
             ended = np.flatnonzero(dead & (self.ids >= 0))
             scale = self._scale()[0][ended]
