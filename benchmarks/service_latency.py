@@ -55,6 +55,8 @@ VARIANTS = {  # name: the server's environment
     "torch": {"ORPOSE_BACKEND": "torch", "ORPOSE_PRECISION": "auto"},
     "onnxruntime": {"ORPOSE_BACKEND": "onnxruntime", "ORPOSE_PRECISION": "auto"},
     "openvino": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "auto"},
+    "openvino-bf16": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "bf16"},  # float forced (native bf16)
+    "openvino-fp32": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "fp32"},  # float forced (AVX2-only)
     "openvino-int8": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "int8"},
     "default-jpeg": {},  # the default server; colour sent as JPEG q95 and depth as fast PNG
 }
