@@ -152,7 +152,7 @@ def tracker_config(overrides: list[str]) -> TrackerConfig:
     return config
 
 
-# The cues of issue 46, one configuration per row of --ablation: (name, gives the tracker views, --set overrides).
+# The tracker's cues against phantoms and for identity, one configuration per row of --ablation: (name, gives the tracker views, --set overrides).
 # "signature" weighs the body's scale in the association cost, "re-id" lets a new track take an ended or coasting
 # track's id by it (TrackerConfig.signature_mm, reid_s).
 ABLATION = (
@@ -175,7 +175,7 @@ def ablation(rows: list, views: dict, base: list[str]) -> list[dict]:
     return out
 
 
-ABLATION_FIGURES = ("idf1", "hota", "mota", "id_switches", "switches_per_1000", "misses", "false_positives",
+ABLATION_FIGURES = ("gt_person_frames", "idf1", "hota", "mota", "id_switches", "switches_per_1000", "misses", "false_positives",
                     "phantom_tracks", "longest_on_nobody_s", "track_ms_mean", "background_ms_mean")  # fmt: skip
 
 
@@ -287,9 +287,7 @@ def births(frames: list[SequenceFrame], tracker: Tracker, near_mm: float = 500.0
 def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
-    p.add_argument(
-        "--data", type=Path, required=True, help="a rendered sequence (posenet.synth --sequence)"
-    )
+    p.add_argument("--data", type=Path, required=True, help="a rendered sequence (posenet.synth --sequence)")
     p.add_argument("--annotations", type=Path, help="its annotations (default: DATA/annotations.json)")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--detections", type=Path, help="the pipeline's persons per frame (cache), tracked here")
@@ -323,7 +321,7 @@ def main(argv: list[str] | None = None) -> dict:
                    help="override a TrackerConfig field (offline tracking), e.g. --set max_spread_mm=500, or of its "
                    "background model, e.g. --set background.margin_mm=200")  # fmt: skip
     p.add_argument("--ablation", action="store_true",
-                   help="instead of one configuration, compare the cues of issue 46 side by side (offline tracking): "
+                   help="instead of one configuration, compare the tracker's cues side by side (offline tracking): "
                    "as before, + the background rule, + the body signature in the cost, + re-identification")  # fmt: skip
     p.add_argument("--background", action="store_true",
                    help="give the tracker each frame's depth images and cameras (offline tracking), as a stream "
@@ -372,7 +370,9 @@ def main(argv: list[str] | None = None) -> dict:
                 report.setdefault("ablation", {})[seq] = table = ablation(rows, views, args.set)
                 print(f"sequence {seq}: " + " | ".join(ABLATION_FIGURES))
                 for row in table:
-                    print(f"  {row['cues']:<34} " + " | ".join(str(row.get(k, "-")) for k in ABLATION_FIGURES))
+                    print(
+                        f"  {row['cues']:<34} " + " | ".join(str(row.get(k, "-")) for k in ABLATION_FIGURES)
+                    )
                 continue
             for frame_id, frame in rows:
                 frame.views = views.get(frame_id)

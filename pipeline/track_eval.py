@@ -49,8 +49,8 @@ GOALS = {
     "accel_ratio": ("<=", 0.5),
     "bone_std_max_mm": ("<=", 10.0),
     "track_ms_mean": ("<=", 2.0),
-    "longest_on_nobody_s": ("<=", 1.0),  # issue 46: no track on nobody longer than 1 s
-    "background_ms_mean": ("<=", 3.0),  # issue 46: the room's static depth, part of track_ms (given views)
+    "longest_on_nobody_s": ("<=", 1.0),  # no track on nobody longer than 1 s
+    "background_ms_mean": ("<=", 3.0),  # the room's static depth, part of track_ms (given views)
 }
 
 

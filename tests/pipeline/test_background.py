@@ -159,5 +159,5 @@ def test_a_track_that_passes_from_its_person_to_a_coat_ends_within_a_second():
 
     parked = ids(TrackerConfig())
     assert set(parked[3:60]) == {0}  # the person, from their third frame
-    assert set(parked[60 + 15 :]) == {None}  # on the coat for less than the 1 s issue 46 allows, then none
+    assert set(parked[60 + 15 :]) == {None}  # on the coat for less than the 1 s allowed, then none
     assert set(ids(TrackerConfig(park_s=None))[60:]) == {0}  # without the rule the track stays on the coat
