@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -120,3 +121,16 @@ def test_section_round_trip(tmp_path):
     back = Calibration.from_config(config)
     spread = torch.rand(5, NUM_JOINTS) * 200
     torch.testing.assert_close(back(spread, torch.ones(5)), FITTED(spread, torch.ones(5)))
+
+
+def test_report_caps_one_view_skeletons_and_scores_served_confidences():
+    from posenet.evaluation.calibrate import report, served_set
+
+    joints = {"spread_mm": np.full(4, 20.0), "joint": np.array([2, 2, 3, 3]), "support": np.ones(4, int),
+              "error_mm": np.array([10.0, 10.0, 300.0, 300.0]), "capped": np.array([False, False, True, True])}  # fmt: skip
+    cal = Calibration(kind="logistic", intercept=[3.0] * 6, log_spread=[0.0] * 6)
+    r = report({"c": cal}, joints, 100.0)["c"]  # two hits at sigmoid(3), two misses capped at 0.2
+    assert r["ece"] == pytest.approx((2 * (1 - 1 / (1 + np.exp(-3))) + 2 * 0.2) / 4)
+    out = report({"c": cal}, {"confidence": np.array([0.9, 0.1]), "error_mm": np.array([50.0, 500.0])}, 100.0)
+    assert list(out) == ["served"] and out["served"]["ece"] == pytest.approx(0.1)
+    assert served_set("data/x:4=p.json")[1:] == ([4], Path("p.json"))
