@@ -16,7 +16,7 @@ turns), with the machine line from ``/model`` and the load average before and af
 Variants (one server each, side by side in one run): ``default`` (ORPOSE_* defaults, ``ORPOSE_THREADS=2``),
 ``threads1`` (one intra-op thread per stage: the front and the pose stage then each keep a core), ``int8``
 (``ORPOSE_PRECISION=int8``), ``jpeg`` (the default server, colour sent as JPEG q95 and depth as fast PNG,
-``service.client.Transport``).
+``service.client.Transport``), ``threads1-jpeg`` (both).
 """
 
 from __future__ import annotations
@@ -46,6 +46,7 @@ VARIANTS = {  # name: (the server's environment, the transport)
     "threads1": ({"ORPOSE_THREADS": "1"}, Transport()),
     "int8": ({"ORPOSE_PRECISION": "int8"}, Transport()),
     "jpeg": ({}, Transport("jpeg", "png-fast")),
+    "threads1-jpeg": ({"ORPOSE_THREADS": "1"}, Transport("jpeg", "png-fast")),
 }
 STAGES = ("decode", "detect", "match", "pose", "track", "wait")
 
