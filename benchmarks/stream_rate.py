@@ -146,7 +146,7 @@ def format_table(results: dict) -> str:
 
     first = next(iter(results.values()))
     lines = [machine_line(first["model"]["machine"]), ""]
-    head = (f"{'variant':<10}{'runtime':<34}{'sent fps':>9}{'answered/s':>11}{'dropped':>8}{'refused':>8}"
+    head = (f"{'variant':<15}{'runtime':<34}{'sent fps':>9}{'answered/s':>11}{'dropped':>8}{'refused':>8}"
             f"{'lag p50':>9}{'p95':>8}{'max':>8}" + "".join(f"{s:>8}" for s in STAGES) + f"{'load':>11}")  # fmt: skip
     lines += [head + "   (ms; stages: server p50)", "-" * len(head)]
     for name, r in results.items():
@@ -156,7 +156,7 @@ def format_table(results: dict) -> str:
             stages = "".join(f"{s['stages_ms_p50'].get(x, float('nan')):>8.1f}" for x in STAGES)
             refused = sum(s["refused"].values())
             lines.append(
-                f"{name:<10}{runtime:<34}{float(fps):>9.0f}{s['answered_fps']:>11.2f}{s['dropped']:>8}{refused:>8}"
+                f"{name:<15}{runtime:<34}{float(fps):>9.0f}{s['answered_fps']:>11.2f}{s['dropped']:>8}{refused:>8}"
                 f"{lag.get('p50', float('nan')):>9.0f}{lag.get('p95', float('nan')):>8.0f}"
                 f"{lag.get('max', float('nan')):>8.0f}{stages}{r['load_before']:>6.1f}/{r['load_after']:<4.1f}"
             )
