@@ -53,6 +53,19 @@ def load_pipeline(settings: Settings) -> ScenePipeline:
     )
 
 
+def torch_threads(threads: int, pipeline: ScenePipeline) -> int:
+    """torch's intra-op threads while serving: ``threads`` where a network runs on torch, else 1.
+
+    With both networks on an inference runtime (which keeps ``threads`` of its own), torch computes only the pose
+    stage's small tensor ops (crops, lifting, softmax moments). Two OpenMP threads there wait at every op for a
+    core that the runtime's threads or another process hold: on a 2-core machine with a load average of 3, the
+    pose stage took 750-850 ms per 4-person frame at 2 torch threads against 50-110 ms at 1, with the runtimes at
+    2 threads either way (2026-12-06, Intel Xeon with AMX; docs/service.md, "Settings")."""
+    networks = [pipeline.pose] + ([pipeline.detector] if pipeline.detector is not None else [])
+    on_torch = any(getattr(n, "backend", None) is None or n.backend.name == "torch" for n in networks)
+    return threads if on_torch else 1
+
+
 @asynccontextmanager
 async def lifespan(app: FastAPI):
     settings: Settings = app.state.settings
@@ -63,6 +76,9 @@ async def lifespan(app: FastAPI):
     metrics: Metrics = app.state.metrics
     if app.state.pipeline is None:
         app.state.pipeline = await anyio.to_thread.run_sync(lambda: load_pipeline(settings))
+    # set in every worker thread before its work (service.routes.on_worker): a thread keeps the OpenMP team size
+    # it first ran torch with, whatever the main thread sets later
+    app.state.torch_threads = torch_threads(settings.threads, app.state.pipeline)
     metrics.models(app.state.pipeline)
     yield
     app.state.pipeline = None

@@ -16,6 +16,7 @@ from functools import partial
 from typing import Annotated
 
 import anyio
+import torch
 from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response
 from fastapi.openapi.docs import get_redoc_html, get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
 from fastapi.responses import HTMLResponse, JSONResponse
@@ -364,7 +365,11 @@ async def on_worker(request: Request, work: Callable[[], object], limiter: anyio
     """``work()`` on a worker thread of ``limiter``, stopped when the client leaves (a 400); the models' own
     checks on what validation let through (ValueError) become 422s that name them."""
 
+    threads = getattr(request.app.state, "torch_threads", None)
+
     def run():
+        if threads is not None and torch.get_num_threads() != threads:
+            torch.set_num_threads(threads)  # service.app.torch_threads
         try:
             return work()
         except InputError:

@@ -41,7 +41,15 @@ class Settings(BaseSettings):
         "auto",
         description="inference runtime of both networks: auto (openvino, else onnxruntime, else torch)",
     )
-    threads: int = Field(2, ge=1, le=256, description="torch intra-op threads (torch.set_num_threads)")
+    # The runtimes' threads per network call. torch's own small ops of the pose stage run on one thread once both
+    # networks run on a runtime (service.app.torch_threads: two OpenMP threads stall there on a shared machine).
+    threads: int = Field(
+        2,
+        ge=1,
+        le=256,
+        description="intra-op threads of the inference runtimes (OpenVINO, ONNX Runtime), and of torch where a "
+        "network runs on torch; with both networks on a runtime, torch's own small ops run on one thread",
+    )
     # posenet.net.infer.PoseEstimator.from_checkpoint(flip_test=): on the unseen alt look's day 4 the mirrored pass
     # gained 0.3 cm (7.52 -> 7.21), on the twin 0.1 (docs/RESULTS.md); it doubles the pose stage's U-Net work.
     flip_test: bool | None = Field(
