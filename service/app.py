@@ -8,6 +8,7 @@ into ``app.state.pipeline``, unless a ready pipeline is passed in (tests, offlin
 
 from __future__ import annotations
 
+import time
 from contextlib import asynccontextmanager
 
 import anyio
@@ -24,6 +25,7 @@ from service.limits import BodyLimitMiddleware, InFlightLimiter
 from service.metrics import Metrics, RequestCounter
 from service.routes import docs_router, metrics_router, protected, public
 from service.settings import Settings
+from service.stream_store import RedisStreams
 from service.streams import StreamRegistry
 
 
@@ -136,7 +138,13 @@ def create_app(settings: Settings | None = None, pipeline: ScenePipeline | None 
         lambda: Tracker(tracker),
         settings.retry_after_s,
         floor_up=settings.track_floor_up,
+        static_scene=settings.track_static_scene,
         unsure=bool(settings.track_unsure_gate_mm),
+        store=None
+        if settings.redis_url is None
+        else RedisStreams(settings.redis_url, settings.stream_idle_s),
+        # the replicas sharing a store share a clock too: wall time for streams without timestamp_s
+        **({} if settings.redis_url is None else {"now": time.time}),
     )
     _watch(app, metrics, receiving)
     app.add_middleware(

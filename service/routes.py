@@ -462,6 +462,8 @@ async def post_stream_frame(
         _admitted(request, settings, streams, slot=False, **frame_of) as frame,
         AsyncExitStack() as slot,
     ):
+        if frame.replay is not None:  # the last frame again, its answer lost on the way: the same answer
+            return Response(frame.replay, media_type="application/json")
         try:
             async with frame.turn("front"):
                 await slot.enter_async_context(_admitted(request, settings))  # held to the answer
@@ -492,4 +494,4 @@ async def post_stream_frame(
 )
 async def delete_stream(stream_id: Annotated[str, _STREAM_ID], streams: StreamsDep) -> StreamEnded:
     check_stream_id(stream_id)
-    return streams.end(stream_id)
+    return await streams.end(stream_id)

@@ -122,6 +122,12 @@ class Settings(BaseSettings):
     stream_idle_s: float = Field(
         60.0, gt=0, le=86400, description="a stream that gets no frame for this long ends (expires)"
     )
+    # service.stream_store: replicas behind a load balancer share their streams through Redis (docs/deploy.md).
+    redis_url: str | None = Field(
+        None,
+        description="Redis URL (redis://host:6379/0) where streams keep their state, so that any replica can take "
+        "a stream's next frame; unset: streams live in this process",
+    )
     # pipeline.track.TrackerConfig.max_spread_mm, chosen on rendered sequences with the shipped weights; another
     # checkpoint spreads its joints differently (random weights: ~1000 mm) and may need another value.
     track_max_spread_mm: float = Field(
@@ -174,6 +180,13 @@ class Settings(BaseSettings):
     )
     # Scenes without "up": a stream finds the floor in its first frame's depth images (posenet.rig.check.
     # floor_of_frame: within 0.3 degrees of the room frame on rendered MVOR-rig frames, some tens of ms once).
+    # pipeline.background: each stream learns its cameras' static depth, and a new track is confirmed only once its
+    # person moved, stood in front of it, or held a sure upright pose (docs/tracking.md, "An OR it never saw").
+    track_static_scene: bool = Field(
+        True,
+        description="learn each camera's static depth and confirm no track on what never moves (the draped "
+        "table, a coat, a monitor); false: confirm tracks on hits alone",
+    )
     track_floor_up: bool = Field(
         True,
         description="streams, for scenes that give no up: take the room's up from the floor seen in the depth "

@@ -26,6 +26,13 @@ adds a ``track_id`` and the smoothed joints to every person.
   images (``posenet.rig.check.floor_of_frame``, some tens of ms in the pipeline's worker thread), found once per stream and
   rig and kept; a frame that shows no floor leaves the rule off, and the stream looks again
   ``FLOOR_RETRY_FRAMES`` frames later. Each response says which it used (``stream.up``).
+- **Replicas.** With ``ORPOSE_REDIS_URL`` a stream's state (its tracker, clock, last frame, floor and last answer)
+  lives in Redis (``service.stream_store``) instead of this process, so the replicas behind a load balancer share
+  their streams: a frame's pose turn holds the stream's Redis lock, reads the state, and writes it back with its
+  answer. Each replica still overlaps the stages of the frames it receives. A frame sent again with the
+  ``timestamp_s`` of the stream's last frame (a client, or nginx, retrying after the replica that took it died
+  before answering) gets that frame's stored answer instead of a 409. ``ORPOSE_MAX_STREAMS`` bounds each replica's
+  streams, and the server clock of streams without ``timestamp_s`` is wall time, which the replicas share.
 - **Bounds.** At most ``ORPOSE_MAX_STREAMS`` streams are held; one more is a 503 with Retry-After (the time
   until the least recently used idle stream expires). A stream that gets no frame for
   ``ORPOSE_STREAM_IDLE_S`` ends; expired streams are dropped whenever a stream route is called. ``DELETE
@@ -64,6 +71,7 @@ from service.schemas import (
     StreamTimings,
     TrackedPerson,
 )
+from service.stream_store import RedisStreams, StaleState
 from service.validation import ValidatedScene
 
 CONFLICT = 409
@@ -185,6 +193,18 @@ class Stream:
     front: Turn = field(default_factory=lambda: Turn("front"))  # decoding and detection
     pose: Turn = field(default_factory=lambda: Turn("pose"))  # the pose stage and the tracker
     taking: list[Frame] = field(default_factory=list)  # frames admitted, not yet answered or refused
+    version: int | None = (
+        None  # with a shared store: the version of the state this replica holds (None: none)
+    )
+    last_answer: bytes | None = (
+        None  # with a shared store: the last frame's answer, for a retry of that frame
+    )
+
+    # What a shared store keeps (service.stream_store): everything a replica needs to take the next frame.
+    SHARED = ("tracker", "frames", "clock", "last_time", "origin", "floor", "last_answer")
+
+    def shared(self) -> dict:
+        return {name: getattr(self, name) for name in self.SHARED}
 
 
 @dataclass(frozen=True)
@@ -238,10 +258,14 @@ class StreamRegistry:
         now: Callable[[], float] = time.monotonic,
         floor_up: bool = True,
         unsure: bool = True,
+        store: RedisStreams | None = None,
+        static_scene: bool = True,
     ) -> None:
         """``floor_up``: find the room's up in the depth images for scenes without one (``ORPOSE_TRACK_FLOOR_UP``);
-        ``unsure``: give the trackers the persons the detector was unsure of, when they can use them."""
-        self.floor_up, self.unsure = floor_up, unsure
+        ``unsure``: give the trackers the persons the detector was unsure of, when they can use them; ``store``:
+        keep the streams' state in Redis, shared by the replicas (module docstring), else in this process."""
+        self.floor_up, self.unsure, self.store = floor_up, unsure, store
+        self.static_scene = static_scene  # give the trackers the frames' views (ORPOSE_TRACK_STATIC_SCENE)
         self.max_streams = max_streams
         self.idle_s = idle_s
         self.tracker = tracker
@@ -282,10 +306,48 @@ class StreamRegistry:
         stream = self.streams[stream_id] = Stream(stream_id, self.tracker(), self.now())
         return stream
 
-    def end(self, stream_id: str) -> StreamEnded:
+    async def pull(self, stream: Stream) -> None:
+        """With a shared store: bring ``stream`` up to the state stored for it (another replica may have taken its
+        last frames; none stored: it ended or expired, and starts afresh)."""
+        if self.store is None:
+            return
+        got = await self.store.load(stream.id)
+        if got is None:
+            if stream.version is not None:
+                fresh = Stream(stream.id, self.tracker(), stream.last_used)
+                for name in Stream.SHARED:
+                    setattr(stream, name, getattr(fresh, name))
+                stream.version = None
+            return
+        version, state = got
+        if version != stream.version:
+            for name in Stream.SHARED:
+                setattr(stream, name, state[name])
+            stream.version = version
+
+    async def push(self, stream: Stream) -> None:
+        """With a shared store: write the state of ``stream`` after a frame it took (under its lock)."""
+        if self.store is None:
+            return
+        try:
+            stream.version = await self.store.save(stream.id, stream.version, stream.shared())
+        except StaleState as exc:
+            stream.version = None  # read afresh next time
+            raise HTTPException(
+                CONFLICT,
+                f"{exc}: another replica took a frame of it meanwhile (its lock outlived "
+                f"{self.store.lock_timeout_s:g} s); send the next frame",
+            ) from exc
+
+    async def end(self, stream_id: str) -> StreamEnded:
         """End ``stream_id`` now; 404 when there is no such stream."""
         self.expire()
         stream = self.streams.pop(stream_id, None)
+        if self.store is not None:
+            state = await self.store.delete(stream_id)
+            if state is not None:
+                return StreamEnded(id=stream_id, frames=state["frames"], tracks=state["tracker"].next_id)
+            stream = None
         if stream is None:
             raise HTTPException(
                 404,
@@ -305,6 +367,11 @@ class StreamRegistry:
         stream.users += 1
         taken = None
         try:
+            await self.pull(stream)
+            if self.store is not None and timestamp_s is not None and timestamp_s == stream.last_time:
+                # The stream's last frame sent again: its answer was lost on the way (module docstring).
+                yield Frame(stream, timestamp_s, "client", received, replay=stream.last_answer)
+                return
             clock = "server" if timestamp_s is None else "client"
             time_s, origin = _frame_time(stream, clock, timestamp_s, received)
             newer = max((f.time for f in stream.taking), default=-math.inf)
@@ -316,7 +383,9 @@ class StreamRegistry:
                     newer,
                 ))  # fmt: skip
                 return
-            taken = Frame(stream, time_s, clock, received, self.floor_up, self.unsure, origin=origin)
+            taken = Frame(
+                stream, time_s, clock, received, self.floor_up, self.unsure, origin=origin, registry=self
+            )
             stream.taking.append(taken)
             yield taken
         finally:
@@ -387,6 +456,8 @@ class Frame:
     origin: float = 0.0  # the server clock's origin this frame's time counts from (registry clock)
     waited_ms: float = 0.0  # waiting for the stream's turns (front and pose)
     superseded: Dropped | None = None  # it arrived after a later frame of the stream: it is dropped at once
+    replay: bytes | None = None  # the stream's last frame sent again: its stored answer (shared store)
+    registry: StreamRegistry | None = None  # the registry that took it (its shared store, if any)
 
     @asynccontextmanager
     async def turn(self, stage: str) -> AsyncIterator[None]:
@@ -396,7 +467,34 @@ class Frame:
             raise self.superseded
         async with getattr(self.stream, stage).take(self.time) as waited_ms:
             self.waited_ms += waited_ms
-            yield
+            store = None if self.registry is None or stage != "pose" else self.registry.store
+            if store is None:
+                yield
+                return
+            async with store.hold(self.stream.id, wait_s=store.lock_timeout_s):  # one replica at a time
+                await self._shared_turn()
+                try:
+                    yield
+                except BaseException:
+                    self.stream.version = None  # it may have changed here without being written: read afresh
+                    raise
+                await self.registry.push(self.stream)
+
+    async def _shared_turn(self) -> None:
+        """The pose turn's start with a shared store: the stream as stored, and this frame still later than the
+        last one any replica took (else it is dropped: a later frame was taken elsewhere meanwhile)."""
+        stream = self.stream
+        await self.registry.pull(stream)
+        if stream.clock is not None and self.time <= stream.last_time:
+            raise Dropped(
+                f"a later frame of this stream (at {stream.last_time:.3f} s) was taken by another replica while "
+                f"this one (at {self.time:.3f} s) was decoded: a stream takes its frames in time order",
+                stream.last_time,
+            )
+
+    def _views(self, scene: ValidatedScene):
+        """The views the tracker learns the static scene from (None: ORPOSE_TRACK_STATIC_SCENE is off)."""
+        return scene.views if self.registry is None or self.registry.static_scene else None
 
     def dropped(self, drop: Dropped, t_start: float) -> bytes:
         """The response body of this frame, dropped: nothing of the stream changed."""
@@ -439,7 +537,7 @@ class Frame:
         unsure = np.array([p.unsure for p in result.persons], bool)
         up_source = "scene" if scene.up is not None else "floor" if self.up is not None else "none"
         t_track = time.perf_counter()
-        tracked = stream.tracker.update(joints, spread, self.time, unsure, self.up)
+        tracked = stream.tracker.update(joints, spread, self.time, unsure, self.up, views=self._views(scene))
         track_ms = (time.perf_counter() - t_track) * 1e3
         if stream.clock is None:
             stream.clock, stream.origin = self.clock, self.origin
@@ -478,4 +576,7 @@ class Frame:
                 id=stream.id, frames=stream.frames, timestamp_s=self.time, clock=stream.clock, up=up_source
             ),
         )
-        return serialise(body, t0, t_start)
+        answer = serialise(body, t0, t_start)
+        if self.registry is not None and self.registry.store is not None:
+            stream.last_answer = answer
+        return answer

@@ -66,6 +66,7 @@ def server(tmp_path_factory):
         "ORPOSE_TRACK_MIN_TORSO_MM": "0",
         "ORPOSE_TRACK_MIN_HEIGHT_MM": "0",  # and any height (the client sends the rendered room's up)
         "ORPOSE_TRACK_LYING_HEIGHT_MM": "0",  # nor wait for a low, unsure skeleton to rise
+        "ORPOSE_TRACK_STATIC_SCENE": "0",  # nor for a still, random-weight skeleton to move off the static depth
     }
     with Server(env) as url, httpx.Client(base_url=url, headers=AUTH, timeout=60) as client:
         yield client
@@ -99,6 +100,7 @@ def test_the_room_s_up_reaches_the_tracker(tmp_path_factory, sequence, floor_up)
         "ORPOSE_TRACK_MAX_SPREAD_MM": "5000",
         "ORPOSE_TRACK_MIN_TORSO_MM": "0",
         "ORPOSE_TRACK_MIN_HEIGHT_MM": "2000",
+        "ORPOSE_TRACK_STATIC_SCENE": "0",
         "ORPOSE_TRACK_FLOOR_UP": "1" if floor_up else "0",
     }
     assert sequence.ds[0].up is not None
