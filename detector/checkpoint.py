@@ -19,7 +19,7 @@ from safetensors.torch import load_file
 from transformers import DetrForObjectDetection
 
 from detector.model import DetectorConfig, arch_classes, from_detr_config
-from posenet.net.checkpoint_files import checkpoint_config, files, read_config, write_checkpoint
+from posenet.net.checkpoint_files import checkpoint_config, files, read_config, stored, write_checkpoint
 
 PRECISIONS = ("float32", "float16", "int8")
 INT8_SCALE = ".int8_scale"  # key suffix of the per-output-channel scales of an int8 weight
@@ -97,7 +97,9 @@ def trained_on(meta: dict) -> dict | str | None:
 def load_checkpoint(
     path: str | Path, device: str | torch.device = "cpu"
 ) -> tuple[DetrForObjectDetection, DetectorConfig, dict]:
-    """Rebuild the model of a checkpoint and load its weights; returns ``(model in eval mode, cfg, meta)``."""
+    """Rebuild the model of a checkpoint (a folder or ``NAME.safetensors``; a ``detector.adapt`` run's folder
+    reads its ``last/``) and load its weights; returns ``(model in eval mode, cfg, meta)``."""
+    path = stored(path)
     weights, _ = files(path)
     if not weights.is_file():
         raise FileNotFoundError(f"checkpoint weights {weights} do not exist")

@@ -16,7 +16,7 @@ from pathlib import Path
 import torch
 from safetensors.torch import load_file
 
-from posenet.net.checkpoint_files import CONFIG, WEIGHTS, checkpoint_config, write_checkpoint
+from posenet.net.checkpoint_files import CONFIG, WEIGHTS, checkpoint_config, stored, write_checkpoint
 from posenet.net.model import ModelConfig, PoseNet
 
 DEFAULT_WEIGHTS = Path(__file__).parents[1] / "weights" / "default.safetensors"
@@ -65,11 +65,10 @@ def checkpoint_files(path: str | Path | None) -> tuple[Path, Path]:
                 "RUN/best/model.safetensors "
                 "and RUN/best/config.json to posenet/weights/default.safetensors and default.json)"
             )
-    path = Path(path)
+    path = stored(path)
     if path.is_dir():
-        for sub in (path, path / "best", path / "last"):
-            if (sub / WEIGHTS).is_file():
-                return sub / WEIGHTS, sub / CONFIG
+        if (path / WEIGHTS).is_file():
+            return path / WEIGHTS, path / CONFIG
         raise FileNotFoundError(f"{path} holds no model.safetensors (nor best/ or last/ with one)")
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint {path} does not exist")

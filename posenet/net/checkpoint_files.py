@@ -46,6 +46,17 @@ def files(path: str | Path) -> tuple[Path, Path]:
     raise ValueError(f"checkpoint {path} is neither a folder nor a .safetensors/.json file")
 
 
+def stored(path: str | Path) -> Path:
+    """The checkpoint that ``path`` names, for reading: a checkpoint folder or file as it is; a training or
+    adaptation run's folder (no weights of its own) its ``best/``, else its ``last/`` checkpoint."""
+    path = Path(path)
+    if path.is_dir() and not (path / WEIGHTS).is_file():
+        for sub in (path / "best", path / "last"):
+            if (sub / WEIGHTS).is_file():
+                return sub
+    return path
+
+
 def _replace(target: Path, write) -> None:
     tmp = target.with_name(target.name + ".tmp")
     write(tmp)
@@ -72,8 +83,8 @@ def write_checkpoint(
 
 
 def read_config(path: str | Path) -> dict:
-    """The ``config.json`` dict of a checkpoint (folder, ``.safetensors`` or ``.json``)."""
-    _, config = files(path)
+    """The ``config.json`` dict of a checkpoint (folder, run folder, ``.safetensors`` or ``.json``)."""
+    _, config = files(stored(path))
     if not config.is_file():
         raise FileNotFoundError(f"checkpoint config {config} does not exist")
     return json.loads(config.read_text())

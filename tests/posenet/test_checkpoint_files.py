@@ -4,13 +4,16 @@ import json
 
 import pytest
 import torch
+from service_harness import tiny_checkpoints
 
+from detector.checkpoint import load_checkpoint as load_detector
 from posenet.net.checkpoint import load_checkpoint, save_checkpoint, sectioned, training_config
 from posenet.net.checkpoint_files import (
     OLD_STATE,
     STATE,
     files,
     read_config,
+    stored,
     train_state_file,
     write_checkpoint,
 )
@@ -59,3 +62,22 @@ def test_model_info_reads_trained_on_first(tmp_path):
     assert line == "data=d, days=[1, 2]"
     old = json.loads(json.dumps({"data": "d", "holdout_day": 4, "model": {"base": 8}}))  # an old flat config
     assert summarise_training(old) == "data=d, holdout_day=4"
+
+
+def test_a_run_folder_reads_as_its_best_else_last_checkpoint_for_both_stages(tmp_path):
+    pose, det = tiny_checkpoints(tmp_path / "made")
+    assert stored(det) == det  # a checkpoint folder, as it is
+    (tmp_path / "adapt").mkdir()
+    det.rename(tmp_path / "adapt" / "last")
+    assert stored(tmp_path / "adapt") == tmp_path / "adapt" / "last"  # detector.adapt's run: RUN/last
+    a, _, meta = load_detector(tmp_path / "adapt")
+    b, _, _ = load_detector(tmp_path / "adapt" / "last")
+    assert meta == read_config(tmp_path / "adapt")
+    for (ka, va), (kb, vb) in zip(a.state_dict().items(), b.state_dict().items(), strict=True):
+        assert ka == kb and torch.equal(va, vb)
+    (tmp_path / "train").mkdir()
+    pose.rename(tmp_path / "train" / "best")  # posenet.training.train's run: RUN/best, else RUN/last
+    assert stored(tmp_path / "train") == tmp_path / "train" / "best"
+    assert load_checkpoint(tmp_path / "train")[1] == read_config(tmp_path / "train" / "best")
+    with pytest.raises(FileNotFoundError, match="do not exist"):
+        load_detector(tmp_path / "train" / "nothing")
