@@ -29,7 +29,7 @@ from posenet.data.images import COLOR_PNG_PARAMS, DEPTH_PNG_PARAMS
 from posenet.synth.looks import LOOKS, make_look
 from posenet.synth.procedural import procedural_frame
 from posenet.synth.raster import rasterize
-from posenet.synth.rig import random_rig
+from posenet.synth.rig import cam_to_world, intrinsics, random_rig, world_to_cam
 from posenet.synth.scene import frame_primitives, render_frame
 from posenet.synth.twin import load_twin, twin_frame
 
@@ -58,10 +58,10 @@ def run(builder, rig, n: int, seed: int) -> dict:
         renders = clock.time("render (raster + sensor)", render_frame, frame, rig, rng)
         # Ray casting alone, to split the render time into geometry and sensor.
         prims = frame_primitives(frame)
-        T = rig.world_to_cam()
-        for v in range(rig.num_views):
+        T = world_to_cam(rig)
+        for v in range(len(rig)):
             cam = [p.to_camera(T[v]) for p in prims]
-            clock.time("raster only", rasterize, cam, rig.intrinsics[v])
+            clock.time("raster only", rasterize, cam, intrinsics(rig)[v])
         for r in renders:
             clock.time(
                 "png encode",
@@ -147,7 +147,7 @@ def main() -> None:
     cv2.setNumThreads(1)
     rng = np.random.default_rng(args.seed)
     rig = random_rig(rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), 3)
-    enclose = rig.cam_to_world[:, :3, 3]
+    enclose = cam_to_world(rig)[:, :3, 3]
     ctx = load_twin(json.loads(Path(args.mvor).read_text())) if args.mvor else None
     out = {"machine": machine()}
     if "mesh" in args.looks or args.residual:

@@ -6,14 +6,15 @@ from __future__ import annotations
 import numpy as np
 
 from posenet.boxes import box_coverage
-from posenet.synth.rig import Rig
+from posenet.rig import Rig
+from posenet.synth.rig import intrinsics, world_to_cam
 
 
 def project_boxes(rig: Rig, pts: np.ndarray) -> np.ndarray:
     """(V, C, 4) image-clipped xyxy boxes of point sets ``pts (C, N, 3)`` (world) in each camera."""
-    T = rig.world_to_cam()
+    T = world_to_cam(rig)
     out = []
-    for v, K in enumerate(rig.intrinsics):  # a few cameras
+    for v, K in enumerate(intrinsics(rig)):  # a few cameras
         pc = pts @ T[v, :3, :3].T + T[v, :3, 3]
         z = np.maximum(pc[..., 2], 50.0)
         u = K.fx * pc[..., 0] / z + K.cx

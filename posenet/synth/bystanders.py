@@ -18,10 +18,11 @@ from collections.abc import Callable
 import numpy as np
 
 from posenet.boxes import box_iou
+from posenet.rig import Rig
 from posenet.synth.body import sample_outfit
 from posenet.synth.boxes import covered, project_boxes
 from posenet.synth.poses import build_pose, place, sample_params
-from posenet.synth.rig import Rig
+from posenet.synth.rig import cam_to_world, intrinsics
 from posenet.synth.scene import Frame, Person, silhouettes
 from posenet.synth.skeleton_full import F
 
@@ -32,7 +33,7 @@ MAX_COVER = 0.4
 
 def floor_position(rig: Rig, v: int, box: np.ndarray) -> np.ndarray | None:
     """Floor position (x, y) of the person boxed by ``box`` (xyxy) in view ``v``, or None if not locatable."""
-    K = rig.intrinsics[v]
+    K = intrinsics(rig)[v]
     u = (box[0] + box[2]) / 2
     if box[1] > 3:  # the head is in the image: its top is HEAD_TOP above the floor
         row, height = box[1], HEAD_TOP
@@ -40,7 +41,7 @@ def floor_position(rig: Rig, v: int, box: np.ndarray) -> np.ndarray | None:
         row, height = box[3], 0.0
     else:
         return None
-    T = rig.cam_to_world[v]
+    T = cam_to_world(rig)[v]
     d = T[:3, :3] @ np.array([(u - K.cx) / K.fx, (row - K.cy) / K.fy, 1.0])
     o = T[:3, 3]
     if abs(d[2]) < 1e-6:

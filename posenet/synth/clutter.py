@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from posenet.rig import Rig
 from posenet.synth.boxes import covered, project_boxes
 from posenet.synth.primitives import SHELL, Material, Primitive, box, capsule, ellipsoid
-from posenet.synth.rig import Rig
+from posenet.synth.rig import cam_to_world, intrinsics, world_to_cam
 from posenet.synth.room import DARK, METAL, WHITE_PAINT, yaw_matrix
 from posenet.synth.skeleton_full import F
 
@@ -103,8 +104,8 @@ class Placement:
         shell = next((p for p in frame.room if p.kind == SHELL), None)
         self.shell = shell
         self.ceiling = float(shell.center[2] + shell.size[2]) if shell is not None else 2900.0
-        self.cams = rig.cam_to_world[:, :3, 3]  # (V, 3)
-        self.T = rig.world_to_cam()
+        self.cams = cam_to_world(rig)[:, :3, 3]  # (V, 3)
+        self.T = world_to_cam(rig)
         self.sil = self.seen = None
         if protect:
             from posenet.synth.scene import silhouettes, visible_pixels  # scene imports the body models
@@ -122,7 +123,7 @@ class Placement:
         depth = (corners @ self.T[:, 2, :3].T + self.T[:, 2, 3]).T  # (V, N) z in each camera
         proj = project_boxes(self.rig, corners[None])[:, 0]  # (V, 4)
         area = (proj[:, 2] - proj[:, 0]) * (proj[:, 3] - proj[:, 1])
-        sizes = np.array([K.width * K.height for K in self.rig.intrinsics])
+        sizes = np.array([K.width * K.height for K in intrinsics(self.rig)])
         if ((area > 0.35 * sizes) & (depth.max(1) > 0)).any():
             return False
         sil = self.sil
@@ -161,7 +162,7 @@ def add_clutter(frame, rig: Rig, rng: np.random.Generator, kinds: tuple[str, ...
         kind = str(kinds[rng.integers(len(kinds))])
         for _ in range(tries):
             person = frame.persons[rng.integers(len(frame.persons))]
-            v = int(rng.integers(rig.num_views))
+            v = int(rng.integers(len(rig)))
             target = person.points[F["neck"]] * 0.4 + person.points[F["left_hip"]] * 0.3
             target = target + person.points[F["right_hip"]] * 0.3 + np.append(rng.uniform(-350, 350, 2), 0)
             pos = cams[v] + rng.uniform(0.15, 0.8) * (target - cams[v])

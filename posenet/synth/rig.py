@@ -1,49 +1,55 @@
-"""Camera rigs: a random ceiling-mounted RGB-D rig around the table, or MVOR's real rig.
+"""The renderer's cameras: a random ceiling-mounted RGB-D rig around the table, or MVOR's real rig.
 
-A :class:`Rig` holds per camera the distortion-free intrinsics and the pose ``T(cam->world)`` (4x4, world z
-up, floor at z = 0). The dataset's reference frame is camera 0's (``posenet.cameras``); MVOR's
-``firstCamToRoomRef`` is ``T(cam0->room)``, and for the twin the world is MVOR's room frame shifted so that
-the floor (found from the annotated poses) is at z = 0.
+A rig is :class:`posenet.rig.Rig`, the one camera rig of the project, whose reference frame here is the
+renderer's world (z up, floor at z = 0): each camera's extrinsics are ``T(cam->world)``, its names the serial
+numbers written into ``cameras_info``. The dataset's reference frame is camera 0's (``posenet.cameras``); MVOR's
+``firstCamToRoomRef`` is ``T(cam0->room)``, and for the twin the world is MVOR's room frame shifted so that the
+floor (found from the annotated poses) is at z = 0.
+
+The renderer works in NumPy: :func:`intrinsics`, :func:`cam_to_world` and :func:`world_to_cam` read a rig's
+cameras as its raster :class:`Intrinsics` and ``(V, 4, 4)`` arrays, and :func:`world_rig` builds a rig from them.
+Float64 tensors hold the arrays' values exactly, so the pixels do not depend on the round trip.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
 
 import numpy as np
 
+from posenet.cameras import Camera
+from posenet.rig.rigfile import Rig
 from posenet.synth.raster import Intrinsics
 
 KINECT = Intrinsics(538.0, 538.0, 320.0, 240.0)  # MVOR's Kinect-like cameras (fx ~ 535-541 px)
+WORLD = "world (z up, floor at z = 0)"
 
 
-@dataclass
-class Rig:
-    """Cameras of one recording day.
+def world_rig(intrinsics: Sequence[Intrinsics], cam_to_world: np.ndarray, serials: Sequence[str]) -> Rig:
+    """A rig in the renderer's world: per camera its ``Intrinsics`` and ``cam_to_world (V, 4, 4)`` T(cam->world),
+    mm; ``serials`` name the cameras."""
+    if cam_to_world.shape != (len(intrinsics), 4, 4):
+        raise ValueError(f"cam_to_world must be ({len(intrinsics)}, 4, 4), got {cam_to_world.shape}")
+    cameras = [
+        Camera.create(K.fx, K.fy, K.cx, K.cy, T.copy(), None, (int(K.width), int(K.height)))
+        for K, T in zip(intrinsics, cam_to_world, strict=True)
+    ]
+    return Rig(cameras, list(serials), WORLD)
 
-    Attributes:
-        intrinsics: one :class:`Intrinsics` per camera.
-        cam_to_world: (V, 4, 4) T(cam->world), mm.
-        serials: camera serial numbers (strings) for ``cameras_info``.
-    """
 
-    intrinsics: list[Intrinsics]
-    cam_to_world: np.ndarray
-    serials: list[str]
+def intrinsics(rig: Rig) -> list[Intrinsics]:
+    """One raster :class:`Intrinsics` per camera (distortion-free, as the renderer draws)."""
+    return [Intrinsics(*c.intrinsics.tolist(), *c.size) for c in rig.cameras]
 
-    def __post_init__(self) -> None:
-        if self.cam_to_world.shape != (len(self.intrinsics), 4, 4):
-            raise ValueError(
-                f"cam_to_world must be ({len(self.intrinsics)}, 4, 4), got {self.cam_to_world.shape}"
-            )
 
-    @property
-    def num_views(self) -> int:
-        return len(self.intrinsics)
+def cam_to_world(rig: Rig) -> np.ndarray:
+    """(V, 4, 4) T(cam->world), mm: the rig's extrinsics."""
+    return np.stack([c.extrinsics.numpy() for c in rig.cameras])
 
-    def world_to_cam(self) -> np.ndarray:
-        """(V, 4, 4) T(world->cam)."""
-        return np.linalg.inv(self.cam_to_world)
+
+def world_to_cam(rig: Rig) -> np.ndarray:
+    """(V, 4, 4) T(world->cam)."""
+    return np.linalg.inv(cam_to_world(rig))
 
 
 def look_at(position: np.ndarray, target: np.ndarray, roll: float = 0.0) -> np.ndarray:
@@ -90,7 +96,7 @@ def random_rig(
         poses.append(look_at(np.array([pos[0], pos[1], height]), target, rng.normal(0, 0.04)))
         Ks.append(Intrinsics(rng.normal(538, 4), rng.normal(538, 4), rng.normal(320, 5), rng.normal(241, 4)))
     serials = [f"synth-{serial_base + i:04d}" for i in range(V)]
-    return Rig(Ks, np.stack(poses), serials)
+    return world_rig(Ks, np.stack(poses), serials)
 
 
 def mvor_rig(cameras_info: dict, floor_z: float) -> Rig:
@@ -107,4 +113,4 @@ def mvor_rig(cameras_info: dict, floor_z: float) -> Rig:
         Ks.append(Intrinsics(fx, fy, cx, cy, int(w), int(h)))
         poses.append(shift @ to_room @ np.asarray(ext, float).reshape(4, 4))
     serials = list(params.get("ids", [str(i) for i in range(len(Ks))]))
-    return Rig(Ks, np.stack(poses), serials)
+    return world_rig(Ks, np.stack(poses), serials)

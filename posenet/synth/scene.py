@@ -1,7 +1,7 @@
 """One synthetic frame: people and room in, per-view RGB-D images and annotations out.
 
 A :class:`Frame` is a world (z up, floor at 0, mm) made of :class:`Person` s and room primitives.
-:func:`render_frame` ray-casts it into every camera of a :class:`~posenet.synth.rig.Rig`, runs the
+:func:`render_frame` ray-casts it into every camera of a :class:`~posenet.rig.Rig`, runs the
 sensor models and measures, per person and view, the visible pixels: their box (none when a person is hidden
 or almost hidden), the 2D keypoints with MVOR's visibility flags (2 visible, 1 occluded, 0 outside the
 image) and the visible pixel count.
@@ -13,13 +13,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from posenet.rig import Rig
 from posenet.synth.body import TWIN_SHAPE, BodyShape, Outfit, body_primitives, primitive_regions
 from posenet.synth.body_alt import alt_body_primitives
 from posenet.synth.body_grammar import grammar_primitives
 from posenet.synth.mesh_body import mesh_primitives
 from posenet.synth.primitives import SHELL, Primitive
 from posenet.synth.raster import GBuffer, Intrinsics, rasterize
-from posenet.synth.rig import Rig
+from posenet.synth.rig import intrinsics, world_to_cam
 from posenet.synth.sensor import (
     ColourSensorConfig,
     DepthSensorConfig,
@@ -186,9 +187,9 @@ def silhouettes(
 ) -> dict[tuple[int, int], tuple[np.ndarray, float, int]]:
     """Per (view, person): unoccluded silhouette box (xyxy, full-res pixels), nearest depth, pixel count."""
     prims = frame_primitives(frame)
-    T = rig.world_to_cam()
+    T = world_to_cam(rig)
     out = {}
-    for v, K in enumerate(rig.intrinsics):
+    for v, K in enumerate(intrinsics(rig)):
         small = _downscaled(K, factor)
         for i in range(len(frame.persons)):
             g = rasterize([p.to_camera(T[v]) for p in prims if p.owner == i], small)
@@ -205,9 +206,9 @@ def visible_pixels(frame: Frame, rig: Rig, factor: int = 4) -> dict[tuple[int, i
     """Per (view, person): visible pixels in the whole scene, counted at 1/factor resolution (full-res
     units)."""
     prims = frame_primitives(frame)
-    T = rig.world_to_cam()
+    T = world_to_cam(rig)
     out = {}
-    for v, K in enumerate(rig.intrinsics):
+    for v, K in enumerate(intrinsics(rig)):
         keep = [p for p in prims if (v, p.owner) not in frame.hidden]
         g = rasterize([p.to_camera(T[v]) for p in keep], _downscaled(K, factor))
         owners = np.array([p.owner for p in keep], np.int32)
@@ -249,8 +250,8 @@ def render_view(
 ) -> ViewRender:
     """Render view ``v`` of ``frame`` (``prims`` from :func:`frame_primitives`)."""
     vis = vis or VisibilityConfig()
-    K = rig.intrinsics[v]
-    T = rig.world_to_cam()[v]
+    K = intrinsics(rig)[v]
+    T = world_to_cam(rig)[v]
     keep = [p for p in prims if (v, p.owner) not in frame.hidden]
     cam = [p.to_camera(T) for p in keep]
     g = rasterize(cam, K)
@@ -318,4 +319,4 @@ def render_frame(
 ) -> list[ViewRender]:
     """Render every view of the rig."""
     prims = frame_primitives(frame)
-    return [render_view(frame, prims, rig, v, rng, vis) for v in range(rig.num_views)]
+    return [render_view(frame, prims, rig, v, rng, vis) for v in range(len(rig))]

@@ -20,9 +20,10 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
+from posenet.rig import Rig
 from posenet.synth.body import sample_outfit
 from posenet.synth.poses import PoseParams, build_pose, lying_pose, place, sample_params
-from posenet.synth.rig import Rig
+from posenet.synth.rig import cam_to_world
 from posenet.synth.room import Room, patient_drape, sample_room
 from posenet.synth.scene import Frame, Person
 from posenet.synth.sensor import sample_lighting
@@ -318,7 +319,7 @@ def build_stage(
         keep_clear=lanes,
         table_center=probe.table_center,
         table_yaw=probe.table_yaw,
-        enclose=rig.cam_to_world[:, :3, 3],
+        enclose=cam_to_world(rig)[:, :3, 3],
         table_size=probe.table_size,
     )
     a = rng.uniform(0, 2 * np.pi)  # the door: inside the wall, on the floor, in a random direction

@@ -23,13 +23,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from posenet.boxes import box_iou
+from posenet.rig import Rig
 from posenet.synth.body import sample_outfit
 from posenet.synth.boxes import covered, project_boxes
 from posenet.synth.bystanders import add_bystanders
 from posenet.synth.looks import Look
 from posenet.synth.poses import lying_pose
 from posenet.synth.primitives import OWNER_ROOM, Material, box, capsule
-from posenet.synth.rig import Rig, mvor_rig
+from posenet.synth.rig import cam_to_world, intrinsics, mvor_rig, world_to_cam
 from posenet.synth.room import DARK, Room, ceiling_lamp, patient_drape, room_shell, table, yaw_matrix
 from posenet.synth.scene import Frame, Person, silhouettes
 from posenet.synth.sensor import sample_lighting
@@ -114,8 +115,8 @@ def load_twin(ann: dict) -> TwinContext:
         ims = mv["images"]
         day = int(ims[0]["day_id"])
         frame_no = int(ims[0]["file_name"].rsplit("/", 1)[-1].split(".")[0])
-        image_ids = [0] * rig.num_views
-        boxes, patient = {}, [None] * rig.num_views
+        image_ids = [0] * len(rig)
+        boxes, patient = {}, [None] * len(rig)
         roles = {}
         for im in ims:
             v = img_to_cam[im["id"]]
@@ -155,11 +156,11 @@ def room_bounds(ctx: TwinContext, day: int, margin: float = 700.0) -> tuple[np.n
 
     The cameras hang on the walls and ceiling; people must stand inside, with ``margin`` mm to spare.
     """
-    pts = [ctx.rig.cam_to_world[:, :3, 3], ctx.tables[day][0][None]]
+    pts = [cam_to_world(ctx.rig)[:, :3, 3], ctx.tables[day][0][None]]
     pts += [ctx.world_points(kp) for f in ctx.frames if f.day == day for _, kp, _ in f.poses]
     pts = np.concatenate(pts)
     lo, hi = pts[:, :2].min(0) - margin, pts[:, :2].max(0) + margin
-    cams = ctx.rig.cam_to_world[:, :3, 3]
+    cams = cam_to_world(ctx.rig)[:, :3, 3]
     return (lo + hi) / 2, np.array([*((hi - lo) / 2), cams[:, 2].max() / 2 + 150])
 
 
@@ -191,7 +192,7 @@ def fit_table(
     boxes = np.stack([b for _, b in observations])  # (M, 4)
     best = np.array([0.0, 0.0, 0.0, 950.0])  # x, y, yaw, top z
     spread = np.array([2500.0, 2500.0, np.pi, 150.0])
-    centre = rig.cam_to_world[:, :2, 3].mean(0)  # start from the middle of the rig
+    centre = cam_to_world(rig)[:, :2, 3].mean(0)  # start from the middle of the rig
     best[:2] = centre
     best_score = -1.0
     for _ in range(rounds):
@@ -218,11 +219,11 @@ def _monitor_covering(
 
     Returns (centre (3,), half sizes (3,), rotation (3, 3)) in the world frame.
     """
-    K = rig.intrinsics[v]
+    K = intrinsics(rig)[v]
     uc, vc = (rect[0] + rect[2]) / 2, (rect[1] + rect[3]) / 2
     centre_cam = np.array([(uc - K.cx) / K.fx * z, (vc - K.cy) / K.fy * z, z + 30])
     half = np.array([(rect[2] - rect[0]) / 2 / K.fx * z, (rect[3] - rect[1]) / 2 / K.fy * z, 30.0])
-    T = rig.cam_to_world[v]
+    T = cam_to_world(rig)[v]
     return T[:3, :3] @ centre_cam + T[:3, 3], half, T[:3, :3]
 
 
@@ -255,7 +256,7 @@ def add_occluders(
             if corners[:, 2].max() > ceiling - 50 or corners[:, 2].min() < 100:
                 continue
             proj = project_boxes(rig, corners[None])[:, 0]  # (V, 4)
-            T = rig.world_to_cam()
+            T = world_to_cam(rig)
             cost = 0.0
             for w, q in must_show:  # people who must stay visible: how much would this panel cover them?
                 if (w, q) not in sil or (w == v and q == i):
@@ -344,7 +345,7 @@ def twin_frame(
     must_show = assign_boxes(ctx.rig, persons, info.boxes)
     stats_by = add_bystanders(frame, ctx.rig, info.bystander_boxes, must_show, (room_xy, half), rng, dress)
     must_hide = {
-        (v, i) for i, p in enumerate(persons) if p.person_id >= 0 for v in range(ctx.rig.num_views)
+        (v, i) for i, p in enumerate(persons) if p.person_id >= 0 for v in range(len(ctx.rig))
     } - must_show
     stats = add_occluders(frame, ctx.rig, must_hide, must_show, ceiling)
     if look is not None:

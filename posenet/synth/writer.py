@@ -31,6 +31,7 @@ import numpy as np
 from tqdm import tqdm
 
 from posenet.data.images import COLOR_PNG_PARAMS, DEPTH_PNG_PARAMS
+from posenet.rig import Rig
 from posenet.skeleton import BONES, JOINTS
 from posenet.synth.looks import (
     DRAWN_GOWN_SHARE,
@@ -45,7 +46,7 @@ from posenet.synth.looks import (
     uses_mesh,
 )
 from posenet.synth.procedural import procedural_frame
-from posenet.synth.rig import Rig, random_rig
+from posenet.synth.rig import cam_to_world, intrinsics, random_rig, world_rig
 from posenet.synth.scene import Frame, ViewRender, render_frame
 from posenet.synth.sequence import Stage, build_stage
 from posenet.synth.skeleton_full import NUM_MVOR_POINTS
@@ -171,11 +172,11 @@ def build_rigs(cfg: SynthConfig, twin: TwinContext | None) -> DatasetRigs:
                 cs, sn = np.cos(yaw), np.sin(yaw)
                 table[:3, :3] = [[cs, -sn, 0], [sn, cs, 0], [0, 0, 1]]
                 table[:2, 3] = c[:2]
-                rigs[d] = Rig(
-                    twin.rig.intrinsics, np.linalg.inv(table) @ twin.rig.cam_to_world, twin.rig.serials
+                rigs[d] = world_rig(
+                    intrinsics(twin.rig), np.linalg.inv(table) @ cam_to_world(twin.rig), twin.rig.names
                 )
-            numbers[d] = list(range(1, rigs[d].num_views + 1))
-            ref[d] = rigs[d].cam_to_world[0]
+            numbers[d] = list(range(1, len(rigs[d]) + 1))
+            ref[d] = cam_to_world(rigs[d])[0]
         return DatasetRigs(rigs, numbers, ref)
     if cfg.rig != "random":
         raise ValueError(f"unknown rig {cfg.rig!r}; expected 'random' or 'mvor'")
@@ -185,9 +186,9 @@ def build_rigs(cfg: SynthConfig, twin: TwinContext | None) -> DatasetRigs:
         rigs[d] = random_rig(
             rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), cfg.views, serial_base=n
         )
-        numbers[d] = list(range(n + 1, n + 1 + rigs[d].num_views))
-        n += rigs[d].num_views
-    first = rigs[days[0]].cam_to_world[0]
+        numbers[d] = list(range(n + 1, n + 1 + len(rigs[d])))
+        n += len(rigs[d])
+    first = cam_to_world(rigs[days[0]])[0]
     for d in days:  # every day's world is the table frame, so day 1's camera 0 is a valid common reference
         ref[d] = first
     return DatasetRigs(rigs, numbers, ref)
@@ -204,10 +205,10 @@ def cameras_info(rigs: DatasetRigs) -> dict:
             if num in seen:
                 continue
             seen.add(num)
-            K = rig.intrinsics[k]
+            K = intrinsics(rig)[k]
             intr.append(
                 {
-                    "serialnumber": rig.serials[k],
+                    "serialnumber": rig.names[k],
                     "skew_value": 0,
                     "distortion": [0.0] * 5,
                     "principalpoint": [K.cx, K.cy],
@@ -215,8 +216,8 @@ def cameras_info(rigs: DatasetRigs) -> dict:
                     "imagesize": [K.width, K.height],
                 }
             )
-            ext.append((ref_inv @ rig.cam_to_world[k]).ravel().tolist())
-            ids.append(rig.serials[k])
+            ext.append((ref_inv @ cam_to_world(rig)[k]).ravel().tolist())
+            ids.append(rig.names[k])
     first = min(rigs.rigs)
     return {
         "camParams": {
@@ -274,7 +275,7 @@ def _build_frame(
         stage, stats = sequence_stage(cfg, rigs, job.day)
         return stage.frame(job.frame), (stats if job.frame == 0 else {})
     rig = rigs.rigs[job.day]
-    frame = procedural_frame(rng, enclose=rig.cam_to_world[:, :3, 3])
+    frame = procedural_frame(rng, enclose=cam_to_world(rig)[:, :3, 3])
     if look is None:
         return frame, {}
     for person in frame.persons:
@@ -329,8 +330,8 @@ def render_job(job: Job) -> JobResult:
                 raise OSError(f"could not write {path}")
         images.append(
             {
-                "height": rig.intrinsics[k].height,
-                "width": rig.intrinsics[k].width,
+                "height": intrinsics(rig)[k].height,
+                "width": intrinsics(rig)[k].width,
                 "date_captured": f"2026-01-{job.day:02d} 08:{job.frame // 60 % 60:02d}:{job.frame % 60:02d}",
                 "file_name": name,
                 "id": iid,
@@ -476,7 +477,7 @@ def assemble(cfg: SynthConfig, rigs: DatasetRigs, results: list[JobResult]) -> d
     serials = {}
     for d in sorted(rigs.rigs):
         for k, num in enumerate(rigs.cam_numbers[d]):
-            serials[rigs.rigs[d].serials[k]] = num
+            serials[rigs.rigs[d].names[k]] = num
     drop = ("out", "workers") + (() if cfg.mode == "sequence" else SEQUENCE_KEYS)
     settings = {k: v for k, v in asdict(cfg).items() if k not in drop}  # output-independent settings
     info = {

@@ -13,7 +13,7 @@ from posenet.synth.hard_negatives import CLEAR_MM, KINDS, _clearance, hard_negat
 from posenet.synth.looks import Look
 from posenet.synth.primitives import BOX, CAPSULE, CONE, OWNER_HARD_NEGATIVE
 from posenet.synth.procedural import procedural_frame
-from posenet.synth.rig import random_rig
+from posenet.synth.rig import cam_to_world, random_rig
 from posenet.synth.room import yaw_matrix
 from posenet.synth.scene import render_frame
 from posenet.synth.sequence import build_stage
@@ -22,7 +22,7 @@ from posenet.synth.sequence import build_stage
 def _scene(seed: int, hard_negatives: int):
     rng = np.random.default_rng([seed, 0])
     rig = random_rig(rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), 2)
-    frame = procedural_frame(rng, enclose=rig.cam_to_world[:, :3, 3])
+    frame = procedural_frame(rng, enclose=cam_to_world(rig)[:, :3, 3])
     look = Look("random", np.random.default_rng([seed, 1]), hard_negatives=hard_negatives)
     for person in frame.persons:
         look.dress(person)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from posenet.rig import Rig
 from posenet.synth import mesh_model
 from posenet.synth.__main__ import main
 from posenet.synth.body import BodyShape, sample_outfit
@@ -22,7 +23,7 @@ from posenet.synth.looks import random_shape
 from posenet.synth.poses import build_pose, place, sample_params
 from posenet.synth.primitives import MESH, Material, box
 from posenet.synth.raster import Intrinsics, rasterize
-from posenet.synth.rig import Rig
+from posenet.synth.rig import intrinsics, world_rig, world_to_cam
 from posenet.synth.scene import Frame, Person, frame_primitives, render_frame
 from posenet.synth.sensor import sample_lighting
 from posenet.synth.skeleton_full import complete_legs
@@ -104,10 +105,10 @@ def _one_person_frame(occluder: bool = False) -> tuple[Frame, Rig]:
     z = (centre - eye) / np.linalg.norm(centre - eye)
     x = np.cross(z, [0.0, 0.0, 1.0])
     x /= np.linalg.norm(x)
-    cam_to_world = np.eye(4)
-    cam_to_world[:3, :3] = np.stack([x, np.cross(z, x), z], 1)
-    cam_to_world[:3, 3] = eye
-    rig = Rig([Intrinsics(538.0, 538.0, 319.5, 239.5)], cam_to_world[None], ["cam"])
+    pose = np.eye(4)  # T(cam->world)
+    pose[:3, :3] = np.stack([x, np.cross(z, x), z], 1)
+    pose[:3, 3] = eye
+    rig = world_rig([Intrinsics(538.0, 538.0, 319.5, 239.5)], pose[None], ["cam"])
     room = (
         [box(centre + [0, -1200, 0], [150, 20, 150], material=Material((0.5, 0.5, 0.5)))] if occluder else []
     )
@@ -136,9 +137,9 @@ def test_the_depth_of_the_persons_pixels_is_the_meshs():
     frame, rig = _one_person_frame()
     prims = frame_primitives(frame)
     assert all(p.kind == MESH for p in prims if p.owner == 0 and p.mesh is not None) and len(prims) > 3
-    T = rig.world_to_cam()[0]
+    T = world_to_cam(rig)[0]
     cam = [p.to_camera(T) for p in prims]
-    K = rig.intrinsics[0]
+    K = intrinsics(rig)[0]
     g = rasterize(cam, K)
     vv, uu = np.nonzero(g.prim >= 0)
     assert len(vv) > 3000, "the person fills part of the image"

@@ -144,7 +144,6 @@ def test_box_geometry_matches_the_project_camera_model():
     import torch
 
     from posenet.boxes import box_iou
-    from posenet.cameras import Camera
     from posenet.synth.boxes import covered, project_boxes
     from posenet.synth.rig import random_rig
 
@@ -152,8 +151,7 @@ def test_box_geometry_matches_the_project_camera_model():
     rig = random_rig(rng, np.array([0.0, 0.0, 950.0]), np.array([4200.0, 3800.0, 1450.0]), 3)
     pts = rng.uniform([-400, -400, 200], [400, 400, 1700], (2, 12, 3))  # (C, N, 3) world points
     boxes = project_boxes(rig, pts)  # (V, C, 4)
-    for v, K in enumerate(rig.intrinsics):
-        cam = Camera.create(K.fx, K.fy, K.cx, K.cy, extrinsics=rig.cam_to_world[v])  # world as the reference
+    for v, cam in enumerate(rig.cameras):  # posenet.rig.Rig: Cameras whose reference frame is the world
         uv = cam.project(torch.as_tensor(pts)).numpy()
         expect = np.concatenate([uv.min(1), uv.max(1)], 1).clip(0, [639, 479, 639, 479])
         assert np.allclose(boxes[v], expect, atol=1e-6)

@@ -9,7 +9,7 @@ from posenet.synth.boxes import project_boxes
 from posenet.synth.bystanders import floor_position, merge_positions
 from posenet.synth.poses import build_pose, place, sample_params
 from posenet.synth.procedural import procedural_frame
-from posenet.synth.rig import random_rig
+from posenet.synth.rig import cam_to_world, random_rig
 from posenet.synth.scene import Person, render_frame
 from posenet.synth.twin import _cuboid_corners, add_occluders, assign_boxes, fit_table
 
@@ -24,7 +24,7 @@ def test_table_fit_recovers_a_known_table_from_its_boxes(rig):
     truth = np.array([[250.0, -180.0]]), np.array([0.6]), np.array([930.0])
     boxes = project_boxes(rig, _cuboid_corners(*truth))[:, 0]  # (V, 4)
     (centre, yaw), iou = fit_table(
-        rig, [(v, boxes[v]) for v in range(rig.num_views)], np.random.default_rng(0)
+        rig, [(v, boxes[v]) for v in range(len(rig))], np.random.default_rng(0)
     )
     assert iou > 0.9
     assert np.linalg.norm(centre[:2] - truth[0][0]) < 150
@@ -35,7 +35,7 @@ def test_bystander_floor_position_inverts_the_projection_of_a_head_top(rig):
     for xy in ([300.0, 200.0], [-900.0, 600.0]):
         head_top = np.array([[[*xy, 1700.0], [*xy, 1700.0]]])
         feet = np.array([[[*xy, 0.0], [*xy, 0.0]]])
-        for v in range(rig.num_views):
+        for v in range(len(rig)):
             u, top = project_boxes(rig, head_top)[v, 0, :2]
             bottom = project_boxes(rig, feet)[v, 0, 1]
             found = floor_position(rig, v, np.array([u - 30, top, u + 30, bottom]))
@@ -47,7 +47,7 @@ def test_bystander_floor_position_inverts_the_projection_of_a_head_top(rig):
 
 def test_box_assignment_gives_each_real_box_to_the_best_fitting_person(rig):
     rng = np.random.default_rng(0)
-    frame = procedural_frame(rng, patient_prob=0.0, enclose=rig.cam_to_world[:, :3, 3])
+    frame = procedural_frame(rng, patient_prob=0.0, enclose=cam_to_world(rig)[:, :3, 3])
     a = place(build_pose(sample_params(rng, "standing")[1]), np.array([-800.0, 0]), 0.0)
     b = place(build_pose(sample_params(rng, "standing")[1]), np.array([900.0, 300]), 0.0)
     frame.persons[:] = [Person(p, frame.persons[0].outfit, 7) for p in (a, b)]  # MVOR reuses id 7
@@ -59,7 +59,7 @@ def test_box_assignment_gives_each_real_box_to_the_best_fitting_person(rig):
 
 def test_occluders_hide_exactly_the_people_who_must_be_hidden(rig):
     rng = np.random.default_rng(5)
-    frame = procedural_frame(rng, patient_prob=0.0, enclose=rig.cam_to_world[:, :3, 3])
+    frame = procedural_frame(rng, patient_prob=0.0, enclose=cam_to_world(rig)[:, :3, 3])
     before = render_frame(frame, rig, np.random.default_rng(0))
     visible = {(v, i) for v, vr in enumerate(before) for i, b in enumerate(vr.boxes) if b is not None}
     assert len(visible) >= 3
