@@ -58,7 +58,6 @@ from posenet.data.mvor import image_day, load_annotations
 from posenet.evaluation.evaluate import MM_PER_CM, evaluate, match_predictions, prediction_record
 from posenet.evaluation.predict import read_dataset
 from posenet.runtime.execution import machine_line
-from posenet.scene import views_of
 from posenet.skeleton import JOINT_TYPES, SUPPORT_TYPES
 
 VARIANTS = {  # name: (candidate_score, the outlier rule at its default, the free-space rule at its default)
@@ -137,7 +136,7 @@ def draw_frame(pipe: ScenePipeline, sample, out: Path) -> None:
         "tab:olive",
         "tab:cyan",
     )
-    views = views_of(sample)
+    views = sample.views
     boxes, _, candidate = pipe._detect(views)
     candidate = candidate or [np.zeros(len(b), bool) for b in boxes]
     result = pipe.run(views)
@@ -264,7 +263,7 @@ def main(argv: list[str] | None = None) -> dict:
     alone = []  # --single-view: (B, 2) mm per frame
     for i in tqdm(range(len(ds)), desc="frames", unit="frame"):
         sample = ds[i]
-        views = views_of(sample)
+        views = sample.views
         preds["reference"] += pipe.run_sample(sample, reference_boxes=True)[1]
         if args.single_view:
             alone.append(single_view_errors(pipe, sample, views))
@@ -348,7 +347,7 @@ def main(argv: list[str] | None = None) -> dict:
     if args.picture and best[1] is not None:
         variant = pipes[args.variants[-1]]
         sample = ds[best[1]]
-        variant.detector = FrameDetections(pipe.detector, views_of(sample), lowest)
+        variant.detector = FrameDetections(pipe.detector, sample.views, lowest)
         draw_frame(variant, sample, args.picture)
         taken = "" if best[0] is None else f" ({best[0]} unsure boxes taken)"
         print(f"picture of frame {sample.id}{taken}: {args.picture}")

@@ -149,12 +149,11 @@ def profile_frame(root, index: int, threads: int, repeats: int) -> dict:
     from pipeline.two_stage import ScenePipeline
     from posenet.data.mvor import MvorDataset
     from posenet.net.box_poses import slot_layout
-    from posenet.scene import views_of
 
     torch.set_num_threads(threads)
     root = Path(root)
     pipe = ScenePipeline.from_checkpoints(backend="auto", threads=threads)
-    views = views_of(MvorDataset(root, root / "annotations.json")[index])
+    views = MvorDataset(root, root / "annotations.json")[index].views
     model, cfg = pipe.pose.model, pipe.pose.model.config
     detected = pipe.detect(views)
     boxes, candidate = detected.boxes, detected.candidate

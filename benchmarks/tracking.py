@@ -49,7 +49,6 @@ def detect(
     from pipeline.track import Tracker
     from pipeline.two_stage import ScenePipeline
     from posenet.evaluation.predict import read_dataset
-    from posenet.scene import views_of
     from service.streams import Stream, find_up
     from service.validation import ValidatedScene
 
@@ -65,11 +64,11 @@ def detect(
         for i in tqdm(range(len(ds)), desc="pipeline", unit="frame"):
             sample = ds[i]
             t0 = time.perf_counter()
-            result = pipe.run(views_of(sample), unsure=True)
+            result = pipe.run(sample.views, unsure=True)
             up = None
             if looks is not None:
                 stream = looks.setdefault(sequence_of.get(sample.id), Stream("offline", Tracker(), 0.0))
-                up, look, _ = find_up(stream, ValidatedScene(views_of(sample), None, None))
+                up, look, _ = find_up(stream, ValidatedScene(sample.views, None, None))
                 stream.floor, stream.frames = look or stream.floor, stream.frames + 1
             record = {
                 "id": sample.id,
@@ -93,7 +92,6 @@ def stream_cost(data: Path, gt: dict, backend: str, threads: int | None) -> dict
     the tracker (asking it, and grouping them when it can use them: ``SceneResult.unsure_ms``) and its update."""
     from pipeline.two_stage import ScenePipeline, TrackerQuestions
     from posenet.evaluation.predict import read_dataset
-    from posenet.scene import views_of
 
     pipe = ScenePipeline.from_checkpoints(backend=backend, threads=threads)
     ds = read_dataset(data, gt, pipe.read_size)
@@ -105,7 +103,7 @@ def stream_cost(data: Path, gt: dict, backend: str, threads: int | None) -> dict
         for frame_id, frame in tqdm(rows, desc=f"sequence {seq}", unit="frame"):
             t = frame.timestamp_s
             questions = TrackerQuestions.asking(tracker, t, up)  # as a stream asks (streams.Frame.prepare)
-            result = pipe.run(views_of(ds[index[frame_id]]), unsure=questions)
+            result = pipe.run(ds[index[frame_id]].views, unsure=questions)
             joints = np.array([p.joints for p in result.persons], float).reshape(-1, 10, 3)
             spread = np.array([p.spread_mm for p in result.persons], float).reshape(-1, 10)
             unsure = np.array([p.unsure for p in result.persons], bool)

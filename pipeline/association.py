@@ -41,7 +41,6 @@ from pipeline.skeleton_matching import (
 )
 from posenet.boxes import boxes_of_person, coco_to_xyxy, dense_boxes, iou_xyxy, match_persons, person_ids
 from posenet.cli import add_annotations, add_data, add_days, add_threads, annotations_path, set_threads
-from posenet.scene import views_of
 
 # As pipeline.two_stage.PipelineConfig.max_match_combinations: frames beyond it are refused, not enumerated.
 PAIRS_LIMIT = 300_000
@@ -181,7 +180,7 @@ def evaluate_association(
                 raise ValueError(f"frame {sample.id} has no depth image: load the dataset with depth")
             depths.append(v.depth)
         if matcher == "skeletons":
-            views = views_of(sample)
+            views = sample.views
             heat = pose.box_heatmaps(views, pred)
             groupings = [
                 match_heatmaps(

@@ -41,7 +41,7 @@ from posenet.boxes import ground_truth_ids, hull, identified
 from posenet.data.sample import Sample
 from posenet.evaluation.evaluate import prediction_record
 from posenet.net.lifting import JointEstimate
-from posenet.scene import Scene, SceneView, views_of
+from posenet.scene import Scene, SceneView
 
 
 @dataclass
@@ -549,7 +549,7 @@ class ScenePipeline:
         the id of the annotated person whose boxes it overlaps most (the paper's rule,
         ``posenet.boxes.ground_truth_ids``); persons that overlap nobody are left out of the predictions.
         """
-        views = views_of(sample)
+        views = sample.views
         if reference_boxes:
             boxes, ids = zip(*(identified(v.boxes, v.box_person_ids) for v in sample.views), strict=True)
             result = self.run(views, list(boxes), list(ids))

@@ -18,9 +18,8 @@ Usage::
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -32,21 +31,37 @@ from posenet.skeleton import NUM_JOINTS
 Tensor = torch.Tensor
 
 
-class SceneView(NamedTuple):
-    """One view of a scene (a tuple, so ``color, depth, camera = view`` works).
+@dataclass
+class SceneView:
+    """One camera's RGB-D image: the one image type. A reader's :class:`posenet.data.sample.View` is one, with
+    its annotations added; the service's decoded views and the pipeline's are plain ones.
 
-    color: (H, W, 3) uint8 RGB, or None (a depth-only network, or boxes given without colour); depth: (H, W)
-    uint16 mm along z (0 = unknown); camera: the unbatched :class:`Camera` of these images.
+    Attributes:
+        color: (H, W, 3) uint8 RGB, or None (a depth-only network, boxes given without colour, or a reader that
+            did not load colour).
+        depth: (H, W) uint16 mm along z (0 = unknown); None only in a reader's view loaded without depth (a
+            :class:`Scene` needs it: :meth:`Scene.from_sample` says so).
+        camera: the unbatched :class:`Camera` of these images.
+
+    ``color, depth, camera = view`` unpacks it, as when it was a tuple.
     """
 
     color: np.ndarray | None
-    depth: np.ndarray
+    depth: np.ndarray | None
     camera: Camera
 
+    def __iter__(self) -> Iterator:
+        return iter((self.color, self.depth, self.camera))
 
-def views_of(sample) -> list[SceneView]:
-    """The V views of a :class:`posenet.data.sample.Sample` as :class:`SceneView`\\ s."""
-    return [SceneView(v.color, v.depth, v.camera) for v in sample.views]
+    @property
+    def height(self) -> int:
+        img = self.depth if self.depth is not None else self.color
+        return int(img.shape[0]) if img is not None else int(self.camera.size[1])
+
+    @property
+    def width(self) -> int:
+        img = self.depth if self.depth is not None else self.color
+        return int(img.shape[1]) if img is not None else int(self.camera.size[0])
 
 
 def _dense(person_boxes: Sequence[Sequence], V: int, check: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -75,7 +90,8 @@ class Scene:
     """One synchronised multi-view frame and the P persons to estimate in it.
 
     Attributes:
-        views: V :class:`SceneView`\\ s (tuples ``(color, depth, camera)`` are converted), all of one image size.
+        views: V :class:`SceneView`\\ s (a sample's views are; tuples ``(color, depth, camera)`` are converted),
+            all of one image size.
         boxes: (P, V, 4) float32 xyxy pixels of each person in each view (ignored where ``has_box`` is False).
         has_box: (P, V) bool, whether the person has a box in that view; the network runs only there.
         person_ids: (P,) int64 identities (the dataset's person ids, the client's, or 0..P-1).
@@ -95,7 +111,7 @@ class Scene:
     def __post_init__(self) -> None:
         if not self.views:
             raise ValueError("a scene needs at least one view")
-        self.views = [SceneView(*v) for v in self.views]
+        self.views = [v if isinstance(v, SceneView) else SceneView(*v) for v in self.views]
         V = len(self.views)
         self.boxes = torch.as_tensor(self.boxes, dtype=torch.float32)
         self.has_box = torch.as_tensor(self.has_box, dtype=torch.bool)
@@ -176,7 +192,7 @@ class Scene:
         boxes, has_box = _dense([sample.person_boxes(pid) for pid in ids], len(sample.views), check=False)
         keep = has_box.any(1)
         return cls(
-            views_of(sample),
+            list(sample.views),
             torch.from_numpy(boxes[keep]),
             torch.from_numpy(has_box[keep]),
             torch.tensor(ids, dtype=torch.int64)[torch.from_numpy(keep)],

@@ -215,7 +215,7 @@ class Or4dDataset(torch.utils.data.Dataset):
                 depth = subsample_depth(read_depth(self._file(frame, n, "depth"), full.size), self.subsample)
             boxes, ids, kps = self._project(camera, frame)
             boxed[ids] += 1
-            views.append(View(camera, color, depth, boxes, ids, image_id=v, cam_index=v, keypoints2d=kps,
+            views.append(View(color, depth, camera, boxes, ids, image_id=v, cam_index=v, keypoints2d=kps,
                               file_name=str(color_path.relative_to(self.root))))  # fmt: skip
         j = frame.joints.astype(np.float32)
         return Or4dSample(

@@ -115,7 +115,7 @@ class RecordingDataset(torch.utils.data.Dataset):
                 )
             camera = subsampled_camera(camera, self.subsample)
             views.append(
-                View(camera, color, depth, np.zeros((0, 4), np.float32), np.zeros(0, np.int64), image_id=v,
+                View(color, depth, camera, np.zeros((0, 4), np.float32), np.zeros(0, np.int64), image_id=v,
                      file_name=name, cam_index=v, keypoints2d=np.zeros((0, NUM_JOINTS, 3), np.float32))
             )  # fmt: skip
         return Sample(id=self.ids[index], day=0, views=views)

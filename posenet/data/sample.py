@@ -14,16 +14,18 @@ import numpy as np
 
 from posenet.boxes import boxes_of_person
 from posenet.cameras import Camera
+from posenet.scene import SceneView
 
 
 @dataclass
-class View:
-    """One camera's image of the frame.
+class View(SceneView):
+    """One camera's image of the frame as a reader yields it: the :class:`posenet.scene.SceneView` (``color``,
+    ``depth``, ``camera``, ``height``, ``width``) with its annotations.
 
     Attributes:
-        camera: the unbatched :class:`Camera` of this (possibly subsampled) image.
         color: (H, W, 3) uint8 RGB, or None when colour was not loaded.
         depth: (H, W) uint16 depth in mm along z (0 = unknown), or None when depth was not loaded.
+        camera: the unbatched :class:`Camera` of this (possibly subsampled) image.
         boxes: (K, 4) float32 person boxes, xyxy pixels.
         box_person_ids: (K,) int64 person id of each box (-1 for boxes without an identity).
         image_id: the dataset's image id of this view.
@@ -31,25 +33,12 @@ class View:
         cam_index: index of this camera in the dataset's ``cameras_info`` (0 is the reference camera).
     """
 
-    camera: Camera
-    color: np.ndarray | None
-    depth: np.ndarray | None
     boxes: np.ndarray
     box_person_ids: np.ndarray
     image_id: int
     file_name: str
     cam_index: int
     keypoints2d: np.ndarray | None = None  # (K, J, 3) u, v, visibility flag per box, when annotated
-
-    @property
-    def height(self) -> int:
-        img = self.depth if self.depth is not None else self.color
-        return int(img.shape[0]) if img is not None else int(self.camera.size[1])
-
-    @property
-    def width(self) -> int:
-        img = self.depth if self.depth is not None else self.color
-        return int(img.shape[1]) if img is not None else int(self.camera.size[0])
 
 
 @dataclass

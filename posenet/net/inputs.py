@@ -181,7 +181,7 @@ def resize_view(
 def _stack_views(
     views: Sequence[SceneView],
 ) -> tuple[Tensor | None, Tensor, Camera]:
-    shapes = {v[1].shape for v in views}
+    shapes = {v.depth.shape for v in views}
     if len(shapes) != 1:
         raise ValueError(f"all views must have the same image size, got {sorted(shapes)}")
     for i, (color, depth, _cam) in enumerate(views):
@@ -191,12 +191,12 @@ def _stack_views(
             raise ValueError(
                 f"view {i}: colour must be {(*depth.shape, 3)} like its depth, got {color.shape}"
             )
-    depth = torch.from_numpy(np.stack([v[1].astype(np.float32) for v in views]))[:, None]  # (V, 1, H, W)
-    colors = [v[0] for v in views]
+    depth = torch.from_numpy(np.stack([v.depth.astype(np.float32) for v in views]))[:, None]  # (V, 1, H, W)
+    colors = [v.color for v in views]
     color = None
     if all(c is not None for c in colors):
         color = torch.from_numpy(np.stack(colors)).permute(0, 3, 1, 2).float() / 255  # (V, 3, H, W)
-    return color, depth, Camera.stack([v[2] for v in views])
+    return color, depth, Camera.stack([v.camera for v in views])
 
 
 def _in_box(uv: Tensor, boxes: Tensor) -> Tensor:
@@ -236,8 +236,8 @@ def build_scene(
     """The network inputs and lifting points of one scene.
 
     Args:
-        views: V :class:`posenet.scene.SceneView`\\ s ``(color (H, W, 3) uint8 or None, depth (H, W) uint16 mm,
-            Camera)`` of one size: a :class:`posenet.scene.Scene`'s views.
+        views: V :class:`posenet.scene.SceneView`\\ s (color (H, W, 3) uint8 or None, depth (H, W) uint16 mm,
+            camera) of one size: a :class:`posenet.scene.Scene`'s views.
         boxes: (P, V, 4) xyxy boxes in those images' pixels (ignored where ``has_box`` is False).
         has_box: (P, V) bool.
         config: the input configuration.
@@ -246,6 +246,7 @@ def build_scene(
     """
     if not views:
         raise ValueError("a scene needs at least one view")
+    views = [v if isinstance(v, SceneView) else SceneView(*v) for v in views]  # (color, depth, camera) tuples too
     V = len(views)
     boxes = torch.as_tensor(boxes, dtype=torch.float32)
     has_box = torch.as_tensor(has_box, dtype=torch.bool)
@@ -254,16 +255,16 @@ def build_scene(
             f"boxes must be (P, {V}, 4) and has_box (P, {V}), "
             f"got {tuple(boxes.shape)}, {tuple(has_box.shape)}"
         )
-    if config.modality != "depth" and any(v[0] is None for v in views):
+    if config.modality != "depth" and any(v.color is None for v in views):
         raise ValueError(f"modality {config.modality!r} needs colour images, but a view has none")
     target = config.read_size
     if target is not None:
-        resized = [resize_view(c, d, cam, target) for c, d, cam in views]
+        resized = [resize_view(v.color, v.depth, v.camera, target) for v in views]
         factors = torch.tensor([r[3] for r in resized], dtype=torch.float32).repeat(
             1, 2
         )  # (V, 4): sx, sy, sx, sy
         boxes = rescale_pixels(boxes, factors.view(1, V, 4))
-        views = [r[:3] for r in resized]
+        views = [SceneView(*r[:3]) for r in resized]
     color, depth, cameras = _stack_views(views)
     H, W = depth.shape[-2:]
     P = boxes.shape[0]

@@ -18,7 +18,6 @@ from posenet.data.support import pose_support
 from posenet.evaluation.evaluate import prediction_record
 from posenet.net.infer import PoseEstimator
 from posenet.net.model import ModelConfig, PoseNet
-from posenet.scene import views_of
 
 sys.path.insert(0, str(Path(__file__).parents[2] / "benchmarks"))
 from detector_mode import FrameDetections, single_view_errors, worst_poses  # noqa: E402
@@ -35,7 +34,7 @@ def test_single_view_errors_equal_the_fused_error_of_persons_boxed_once(tmp_path
     checked = 0
     for i in range(len(ds)):
         sample = ds[i]
-        views = views_of(sample)
+        views = sample.views
         err = single_view_errors(pipe, sample, views)
         boxed = sum(int(np.isin(v.box_person_ids, sample.person_ids).sum()) for v in sample.views)
         assert err.shape == (boxed, 2) and np.isfinite(err).all() and (err >= 0).all()

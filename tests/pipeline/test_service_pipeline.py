@@ -18,7 +18,7 @@ from posenet.data.mvor import MvorDataset
 from posenet.evaluation.evaluate import evaluate
 from posenet.net.infer import PoseEstimator
 from posenet.net.model import ModelConfig, PoseNet
-from posenet.scene import SceneView, views_of
+from posenet.scene import SceneView
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +44,7 @@ def test_group_by_ids():
 def test_batched_persons_equal_single_runs_and_matcher_equals_ids(setup):
     pipe, _, ds = setup
     sample = ds[0]
-    views = views_of(sample)
+    views = sample.views
     keep = [v.box_person_ids >= 0 for v in sample.views]
     boxes = [v.boxes[k] for v, k in zip(sample.views, keep, strict=True)]
     ids = [v.box_person_ids[k] for v, k in zip(sample.views, keep, strict=True)]
@@ -73,7 +73,7 @@ def test_run_sample_gives_evaluable_predictions(setup):
 
 def test_no_boxes_and_no_detector(setup):
     pipe, _, ds = setup
-    views = views_of(ds[0])
+    views = ds[0].views
     empty = [np.zeros((0, 4), np.float32)] * 3
     assert pipe.run(views, empty).persons == []
     with pytest.raises(ValueError, match="no detector"):
@@ -100,7 +100,7 @@ def test_crowded_boxes_are_refused_before_matching_explodes(setup):
 
 def test_too_many_reference_persons_are_refused(setup):
     pipe, _, ds = setup
-    views = views_of(ds[0])
+    views = ds[0].views
     boxes = [np.tile([[10.0, 10.0, 60.0, 90.0]], (33, 1))] + [np.zeros((0, 4))] * 2
     ids = [np.arange(33), np.zeros(0, np.int64), np.zeros(0, np.int64)]
     with pytest.raises(ValueError, match="33 persons, more than the limit of 32"):

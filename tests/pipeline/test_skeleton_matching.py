@@ -17,7 +17,7 @@ from posenet.data.mvor import MvorDataset
 from posenet.net.infer import PoseEstimator
 from posenet.net.inputs import InputConfig
 from posenet.net.model import ModelConfig, PoseNet
-from posenet.scene import Scene, views_of
+from posenet.scene import Scene
 
 TEMPLATE = np.array(
     [[0, -700, 0], [0, -550, 0], [180, -500, 0], [-180, -500, 0], [120, 0, 0], [-120, 0, 0],
@@ -38,7 +38,7 @@ def estimator(**model) -> PoseEstimator:
 
 
 def frame(sample):
-    views = views_of(sample)
+    views = sample.views
     boxes = [np.asarray(v.boxes, np.float32).reshape(-1, 4) for v in sample.views]
     return views, boxes
 

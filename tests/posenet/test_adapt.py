@@ -19,7 +19,7 @@ from posenet.net.infer import PoseEstimator
 from posenet.net.inputs import InputConfig, build_scene
 from posenet.net.loss import mpjpe
 from posenet.net.model import ModelConfig, PoseNet, PoseOutput
-from posenet.scene import Scene, views_of
+from posenet.scene import Scene
 from posenet.skeleton import BONES
 from posenet.training.adapt import AdaptConfig, adapt_step, load_target_annotations
 from posenet.training.adapt import main as adapt_main
@@ -302,7 +302,7 @@ def test_the_result_loads_like_any_pose_checkpoint(tiny, tmp_path, monkeypatch):
     run = tmp_path / "run"
     assert adapt_main(_args(tiny, run, "no3d", "--epochs", "1", "--consistency", "0", "--bones", "0")) == 0
     sample = MvorDataset(tiny["target"], tiny["no3d"], poses=False)[0]
-    scene = Scene.from_person_boxes(views_of(sample), [sample.person_boxes(0)])
+    scene = Scene.from_person_boxes(sample.views, [sample.person_boxes(0)])
     pred = PoseEstimator.from_checkpoint(run, precision="fp32").predict(scene)
     assert pred.joints.shape == (1, 10, 3) and torch.isfinite(pred.joints).all()
     # the service: ORPOSE_POSE_CHECKPOINT=RUN

@@ -12,14 +12,14 @@ from posenet.net.checkpoint import DEFAULT_WEIGHTS, load_checkpoint, save_checkp
 from posenet.net.infer import PoseEstimator
 from posenet.net.inputs import InputConfig, build_scene, resize_view
 from posenet.net.model import ModelConfig, PoseNet
-from posenet.scene import Scene, views_of
+from posenet.scene import Scene
 
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     root = tmp_path_factory.mktemp("tiny_infer")
     sample = MvorDataset(root, write_dataset(root, {1: 1}, persons=3, seed=1))[0]
-    views = views_of(sample)
+    views = sample.views
     boxes = [[b if b is None else b.tolist() for b in sample.person_boxes(p)] for p in range(3)]
     boxes[2][1] = None  # one person unseen in one view
     return views, boxes

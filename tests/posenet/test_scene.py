@@ -9,13 +9,23 @@ from posenet.data.mvor import MvorDataset
 from posenet.net.infer import PoseEstimator
 from posenet.net.inputs import InputConfig
 from posenet.net.model import ModelConfig, PoseNet
-from posenet.scene import Scene, SceneView, views_of
+from posenet.scene import Scene, SceneView
 
 
 @pytest.fixture(scope="module")
 def samples(tmp_path_factory):
     root = tmp_path_factory.mktemp("tiny_scene")
     return list(MvorDataset(root, write_dataset(root, {1: 3}, persons=3, seed=5)))
+
+
+def test_a_readers_view_is_the_scene_view_a_scene_takes(samples):
+    view = samples[0].views[0]
+    assert isinstance(view, SceneView)
+    color, depth, camera = view  # unpacks like the tuple it once was
+    assert color is view.color and depth is view.depth and camera is view.camera
+    assert (view.height, view.width) == depth.shape
+    scene = Scene.from_person_boxes([tuple(v) for v in samples[0].views], [])  # tuples are converted
+    assert all(type(v) is SceneView and v.depth is s.depth for v, s in zip(scene.views, samples[0].views, strict=True))
 
 
 @pytest.mark.parametrize("which", ["annotated", "boxed"])
@@ -43,14 +53,14 @@ def test_person_boxes_give_the_same_scene_as_the_sample(samples):
     sample = samples[0]
     ref = Scene.from_sample(sample, "boxed")
     ids = ref.person_ids.tolist()
-    scene = Scene.from_person_boxes(views_of(sample), [sample.person_boxes(i) for i in ids], ids, sample.id)
+    scene = Scene.from_person_boxes(sample.views, [sample.person_boxes(i) for i in ids], ids, sample.id)
     for name in ("boxes", "has_box", "person_ids"):
         assert torch.equal(getattr(scene, name), getattr(ref, name))
     assert scene.poses.shape == (len(ids), 10, 3) and not scene.valid.any()  # no truth given
 
 
 def test_construction_errors_name_the_problem(samples):
-    views = views_of(samples[0])
+    views = samples[0].views
     with pytest.raises(ValueError, match=r"person 0 has 2 box entries, expected one per view \(3\)"):
         Scene.from_person_boxes(views, [[None, None]])
     with pytest.raises(ValueError, match="person 1, view 2: box must be finite xyxy"):
@@ -87,7 +97,7 @@ def _estimator(mode: str, flip: bool) -> PoseEstimator:
 def test_a_batch_of_scenes_equals_each_scene_alone(samples, mode, flip):
     est = _estimator(mode, flip)
     scenes = [Scene.from_sample(s, "boxed") for s in samples]
-    empty = Scene.from_person_boxes(views_of(samples[0]), [])
+    empty = Scene.from_person_boxes(samples[0].views, [])
     batch = est.predict([scenes[0], empty, *scenes[1:]], return_heatmaps=True)
     assert len(batch) == len(scenes) + 1 and batch[1].joints.shape == (0, 10, 3)
     for scene, together in zip(scenes, [batch[0], *batch[2:]], strict=True):

@@ -10,7 +10,6 @@ from service_harness import tiny_checkpoints
 from pipeline.skeleton_matching import SkeletonMatchConfig
 from pipeline.two_stage import PipelineConfig, ScenePipeline
 from posenet.data.mvor import MvorDataset
-from posenet.scene import views_of
 
 CROP = 96 * 96  # the cpu preset's network input
 
@@ -20,7 +19,7 @@ def frame(tmp_path_factory):
     pose, det = tiny_checkpoints(tmp_path_factory.mktemp("ckpt"))
     data = write_tiny_mvor(tmp_path_factory.mktemp("tiny"), days=(1,), frames_per_day=1)
     sample = MvorDataset(data.root, data.gt)[0]
-    views = views_of(sample)  # 3 views
+    views = sample.views  # 3 views
     return pose, det, views
 
 
