@@ -80,3 +80,15 @@ def test_a_failed_int8_build_keeps_the_float_graph(graph, monkeypatch):
     runner, p = auto_int8.choose(graph, 1, BF16, _runner(graph), broken)
     assert p.name == "bf16" and "could not be built or measured" in p.reason and "rendered" in p.reason
     assert runner.precision == p
+
+
+def test_the_shipped_weights_have_their_int8_cost_on_record(tmp_path):
+    """A new shipped checkpoint has a graph of its own: without a row in KNOWN_COST, ``auto`` silently stops taking
+    int8 for it on every machine. Measure its cost (benchmarks/backend_accuracy.py) and add the row."""
+    from detector.infer import PersonDetector
+    from posenet.net.infer import PoseEstimator
+
+    for network in (PoseEstimator.from_checkpoint(), PersonDetector.from_checkpoint()):
+        stem = network.export(tmp_path).stem
+        assert stem in auto_int8.KNOWN_COST, f"{stem}: the shipped weights' int8 cost is not on record"
+        assert auto_int8.KNOWN_COST[stem].small
