@@ -269,8 +269,11 @@ def color_dropout(rgb: Tensor, probability: float, generator: torch.Generator | 
 
 # ----------------------------------------------------------------------------- warps
 def _apply(A: Tensor, uv: Tensor) -> Tensor:
-    """Apply ``A (N, 3, 3)`` to points ``uv (N, M, 2)``."""
-    return uv @ A[:, :2, :2].transpose(1, 2) + A[:, None, :2, 2]
+    """Apply ``A (N, 3, 3)`` to points ``uv (N, M, 2)`` (or ``(1, M, 2)``, shared by the N maps).
+
+    Written out per column: a batched matmul with an inner size of 2 costs about 4x more on the CPU (2 ms for a
+    frame's 21 crops of 96x96 at one thread, three times per frame)."""
+    return uv[..., :1] * A[:, None, :2, 0] + uv[..., 1:] * A[:, None, :2, 1] + A[:, None, :2, 2]
 
 
 def _grid(height: int, width: int, device, dtype) -> Tensor:
@@ -299,8 +302,7 @@ def affine_inverse(A: Tensor) -> Tensor:
 def network_pixels_in_original(A: Tensor, out_size: tuple[int, int]) -> Tensor:
     """``(N, h*w, 2)`` original pixel coordinates of every network pixel (row-major): ``A^-1 (u', v')``."""
     w, h = out_size
-    grid = _grid(h, w, A.device, A.dtype).expand(A.shape[0], h * w, 2)
-    return _apply(affine_inverse(A), grid)
+    return _apply(affine_inverse(A), _grid(h, w, A.device, A.dtype))
 
 
 def _normalise(uv: Tensor, size: tuple[int, int]) -> Tensor:

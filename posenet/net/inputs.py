@@ -206,18 +206,22 @@ def _in_box(uv: Tensor, boxes: Tensor) -> Tensor:
     return (u >= b[..., 0] - 0.5) & (u <= b[..., 2] + 0.5) & (v >= b[..., 1] - 0.5) & (v <= b[..., 3] + 0.5)
 
 
-def _sample_per_view(images: Tensor, A: Tensor, P: int, size: tuple[int, int], mode: str) -> Tensor:
-    """Warp ``images (V, C, H, W)`` with ``A (P*V, 3, 3)`` into ``(P*V, C, h, w)``, without P copies.
+def _view_grids(src: Tensor, P: int, size: tuple[int, int], image_size: tuple[int, int]) -> Tensor:
+    """``src (P*V, h*w, 2)``, every network pixel's original pixel (``augment.network_pixels_in_original``), as
+    grid_sample's grids ``(V, h, P*w, 2)`` on images of ``image_size (W, H)``: the P persons' grids of one view
+    side by side along the width, so that grid_sample runs once per view (:func:`_sample_per_view`)."""
+    w, h = size
+    V = src.shape[0] // P
+    src = src.view(P, V, h, w, 2).permute(1, 2, 0, 3, 4)  # (V, h, P, w, 2)
+    return aug._normalise(src.reshape(V, h, P * w, 2), image_size)
 
-    The P persons' grids of one view are laid side by side along the width, so grid_sample runs once per view.
-    """
+
+def _sample_per_view(images: Tensor, grids: Tensor, P: int, size: tuple[int, int], mode: str) -> Tensor:
+    """Sample ``images (V, C, H, W)`` at :func:`_view_grids`' ``grids`` into ``(P*V, C, h, w)``, without P
+    copies of the images."""
     V, C = images.shape[:2]
     w, h = size
-    src = (
-        aug.network_pixels_in_original(A, size).view(P, V, h, w, 2).permute(1, 2, 0, 3, 4)
-    )  # (V, h, P, w, 2)
-    grid = aug._normalise(src.reshape(V, h, P * w, 2), (images.shape[-1], images.shape[-2]))
-    out = torch.nn.functional.grid_sample(images, grid, mode=mode, padding_mode="zeros", align_corners=False)
+    out = torch.nn.functional.grid_sample(images, grids, mode=mode, padding_mode="zeros", align_corners=False)
     # (with V or P = 1 reshape may return a strided view; later .view calls need contiguous memory)
     return (
         out.view(V, C, h, P, w).permute(3, 0, 1, 2, 4).reshape(P * V, C, h, w).contiguous()
@@ -294,11 +298,12 @@ def build_scene(
     src = aug.network_pixels_in_original(A, size)  # (P*V, h*w, 2)
     w, h = size
     mask = _in_box(src, safe) & has_box.reshape(-1, 1)  # (P*V, h*w)
-    d_net = _sample_per_view(depth, A, P, size, "nearest")  # (P*V, 1, h, w)
+    grids = _view_grids(src, P, size, (W, H))  # colour and depth share the image size
+    d_net = _sample_per_view(depth, grids, P, size, "nearest")  # (P*V, 1, h, w)
     known = d_net > 0
     channels = []
     if config.modality in ("rgb", "rgbd"):
-        rgb = _sample_per_view(color, A, P, size, "bilinear")
+        rgb = _sample_per_view(color, grids, P, size, "bilinear")
         if training and augment.color:
             rgb = aug.color_jitter(rgb, augment, generator)
         if training and augment.color_drop > 0:
