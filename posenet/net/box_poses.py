@@ -36,6 +36,7 @@ import numpy as np
 import torch
 
 from posenet.cameras import Camera
+from posenet.net import augment as aug
 from posenet.net import lifting
 from posenet.net.inputs import InputConfig, SceneInput, build_scene
 from posenet.net.lifting import JointEstimate
@@ -262,16 +263,25 @@ def box_heatmaps(model, views: list, boxes: Sequence[np.ndarray], inputs: InputC
     dense, has, view, index = slot_layout(boxes)
     mirrors = (False, True) if model.config.flip_test else (False,)
     scenes: list[SceneInput] = [build_scene(views, dense, has, inputs, mirror=m) for m in mirrors]
-    heats = model.heatmaps(scenes)  # the only U-Net pass: the N boxes (x 2 with flips)
+    crop = inputs.mode == "crop"
+    # the only U-Net pass: the N boxes (x 2 with flips); in crop mode packed, so no (K, V) grid of zeros is
+    # filled and gathered again: box i is row ``rows[i]`` (the boxes' rank in has_box's row-major order)
+    heats = model.heatmaps(scenes, packed=crop)
+    K, V = has.shape
+    slot = index * V + view  # (N,) each box's (k, v) slot, row-major
+    rows = torch.cumsum(has.reshape(-1).long(), 0)[slot] - 1 if crop else None
     passes = []
     for scene, heat in zip(scenes, heats, strict=True):
-        logits = model.logits(scene, heat)  # (K, V, J, M)
-        K, V = has.shape
-        M = logits.shape[-1]
-        uv = scene.uv.to(logits.device).expand(K, V, M, 2)
-        depth = scene.depth.to(logits.device).expand(K, V, M)
-        valid = scene.valid.to(logits.device)
-        box = BoxPass(logits[index, view], uv[index, view], depth[index, view], valid[index, view])
+        if crop:
+            box_logits = aug.unflip_channels(heat[rows], scene.flipped[slot])  # (N, J, h, w)
+            box_logits = box_logits.reshape(len(slot), heat.shape[1], -1)  # (N, J, M)
+        else:
+            box_logits = model.logits(scene, heat)[index, view]  # (N, J, M)
+        M = box_logits.shape[-1]
+        uv = scene.uv.to(box_logits.device).expand(K, V, M, 2)
+        depth = scene.depth.to(box_logits.device).expand(K, V, M)
+        valid = scene.valid.to(box_logits.device)
+        box = BoxPass(box_logits, uv[index, view], depth[index, view], valid[index, view])
         if model.config.aggregation == "3d":
             if scene.uv.shape[0] == 1:  # full mode: the views' pixel grids, shared by the boxes of a view
                 box.points = lifting.lift(scene.cameras, scene.uv, scene.depth)[0, view]  # (N, M, 3)
