@@ -207,6 +207,17 @@ def test_a_cancelled_openvino_call_leaves_the_runner_usable(tmp_path, monkeypatc
     torch.testing.assert_close(est.model.runner(x=small)[0], ref, atol=1e-3, rtol=1e-3)
 
 
+def test_openvino_graphs_keep_the_thread_count_and_do_not_pin_cores(tmp_path, monkeypatch):
+    """Both networks' graphs run at once in a stream: pinned to the same cores they slowed each other
+    (posenet.runtime.graphs.OnnxRunner._compile)."""
+    from posenet.net.infer import PoseEstimator
+
+    monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
+    runner = PoseEstimator.from_checkpoint(None, precision="fp32", backend="openvino", threads=2).model.runner
+    assert runner._compiled.get_property("ENABLE_CPU_PINNING") is False
+    assert runner._compiled.get_property("INFERENCE_NUM_THREADS") == 2
+
+
 def test_int8_is_asked_for_and_never_auto(monkeypatch):
     assert resolve_precision("int8").int8 and "OpenVINO" in resolve_precision("int8").reason
     assert resolve_precision("auto").name in ("fp32", "bf16")
