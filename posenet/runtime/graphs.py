@@ -246,9 +246,9 @@ class OnnxRunner:
         hint = "bf16" if self.precision.bf16 else "f32"
         # No CPU pinning: the detector's and the U-Net's graphs each pin their threads to the same cores, and a
         # stream runs them at once (the front stage of frame t+1 beside the pose stage of frame t). Unpinned, a
-        # 3-camera stream sent at 15 fps was answered at 13.1 against 11.9 frames/s with PNG colour and 14.6
-        # against 14.1 with JPEG, lag p95 193 against 221 ms (medians of 3-5 alternating runs, AMD EPYC Zen 4,
-        # 2 cores, 2026-12-06; benchmarks/RESULTS.md); a single request's latency did not change.
+        # 3-camera stream sent at 15 fps was answered at 13.1 against 11.9 frames/s with PNG colour (3 runs each)
+        # and 14.4 against 14.1 with JPEG, lag p95 204 against 221 ms (9 runs each; medians of alternating runs,
+        # AMD EPYC Zen 4, 2 cores, 2026-12-06; benchmarks/RESULTS.md); a single request's latency did not change.
         self._compiled = ov.Core().compile_model(
             str(self.path),
             "CPU",
