@@ -274,7 +274,7 @@ def box_heatmaps(model, views: list, boxes: Sequence[np.ndarray], inputs: InputC
     for scene, heat in zip(scenes, heats, strict=True):
         if crop:
             box_logits = aug.unflip_channels(heat[rows], scene.flipped[slot])  # (N, J, h, w)
-            box_logits = box_logits.reshape(len(slot), heat.shape[1], -1)  # (N, J, M)
+            box_logits = box_logits.flatten(2)  # (N, J, M)
         else:
             box_logits = model.logits(scene, heat)[index, view]  # (N, J, M)
         M = box_logits.shape[-1]

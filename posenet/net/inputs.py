@@ -206,12 +206,11 @@ def _in_box(uv: Tensor, boxes: Tensor) -> Tensor:
     return (u >= b[..., 0] - 0.5) & (u <= b[..., 2] + 0.5) & (v >= b[..., 1] - 0.5) & (v <= b[..., 3] + 0.5)
 
 
-def _view_grids(src: Tensor, P: int, size: tuple[int, int], image_size: tuple[int, int]) -> Tensor:
+def _view_grids(src: Tensor, P: int, V: int, size: tuple[int, int], image_size: tuple[int, int]) -> Tensor:
     """``src (P*V, h*w, 2)``, every network pixel's original pixel (``augment.network_pixels_in_original``), as
     grid_sample's grids ``(V, h, P*w, 2)`` on images of ``image_size (W, H)``: the P persons' grids of one view
     side by side along the width, so that grid_sample runs once per view (:func:`_sample_per_view`)."""
     w, h = size
-    V = src.shape[0] // P
     src = src.view(P, V, h, w, 2).permute(1, 2, 0, 3, 4)  # (V, h, P, w, 2)
     return aug._normalise(src.reshape(V, h, P * w, 2), image_size)
 
@@ -298,7 +297,7 @@ def build_scene(
     src = aug.network_pixels_in_original(A, size)  # (P*V, h*w, 2)
     w, h = size
     mask = _in_box(src, safe) & has_box.reshape(-1, 1)  # (P*V, h*w)
-    grids = _view_grids(src, P, size, (W, H))  # colour and depth share the image size
+    grids = _view_grids(src, P, V, size, (W, H))  # colour and depth share the image size
     d_net = _sample_per_view(depth, grids, P, size, "nearest")  # (P*V, 1, h, w)
     known = d_net > 0
     channels = []

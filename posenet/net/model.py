@@ -152,7 +152,7 @@ class PoseNet(nn.Module):
         if scene.mode == "full":
             heat = aug.inverse_warp(heat, A, scene.image_size)  # (P*V, J, H, W)
         heat = aug.unflip_channels(heat, flipped)
-        return heat.reshape(P, V, heat.shape[1], -1)  # (P, V, J, M)
+        return heat.reshape(P, V, heat.shape[1], heat.shape[-2] * heat.shape[-1])  # (P, V, J, M); P may be 0
 
     def estimate(self, logits: Tensor, uv: Tensor, depth: Tensor, valid: Tensor, cameras) -> PoseOutput:
         """Joints from logits ``(P, S, J, M)`` at points ``uv (P or 1, S, M, 2)``, ``depth (P or 1, S, M)``,

@@ -77,6 +77,23 @@ def test_heatmaps_for_pictures_and_empty_scene(scene):
     assert empty.joints.shape == (0, 10, 3)
 
 
+@pytest.mark.parametrize("mode", ["crop", "full"])
+def test_box_heatmaps_equal_predict_with_views_without_boxes_and_without_any(scene, mode):
+    """Each box lifted alone is its person predicted on that one box, whichever views hold no box; a frame
+    without any box gives no box (the crops' per-view grids once failed on it)."""
+    views, boxes = scene
+    est = _estimator(mode)
+    none = est.box_heatmaps(views, [np.zeros((0, 4), np.float32)] * len(views))
+    assert none.num_boxes == 0 and none.single_view().joints.shape == (0, 10, 3)
+    per_view = [np.zeros((0, 4), np.float32) for _ in views]
+    per_view[0] = np.array([b[0] for b in boxes], np.float32)  # three boxes in view 0, none in the others
+    alone = est.box_heatmaps(views, per_view).single_view()
+    for k, person in enumerate(boxes):
+        only = [person[0]] + [None] * (len(views) - 1)
+        ref = est.predict(Scene.from_person_boxes(views, [only]))
+        torch.testing.assert_close(alone.joints[k : k + 1], ref.joints, atol=1e-3, rtol=1e-5)
+
+
 def test_bad_boxes_raise(scene):
     views, _ = scene
     est = _estimator("crop")
