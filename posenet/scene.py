@@ -64,6 +64,12 @@ class SceneView:
         return int(img.shape[1]) if img is not None else int(self.camera.size[0])
 
 
+def scene_views(views: Sequence) -> list[SceneView]:
+    """``views`` as :class:`SceneView`\\ s: those that are one (a reader's views too) as they are, tuples
+    ``(color, depth, camera)`` converted."""
+    return [v if isinstance(v, SceneView) else SceneView(*v) for v in views]
+
+
 def _dense(person_boxes: Sequence[Sequence], V: int, check: bool) -> tuple[np.ndarray, np.ndarray]:
     """P lists of V entries (an xyxy box or None) as ``(P, V, 4)`` float32 boxes (zeros where none) and a
     ``(P, V)`` bool mask; ``check`` refuses entries that are not one box per view, finite, with positive size."""
@@ -111,7 +117,7 @@ class Scene:
     def __post_init__(self) -> None:
         if not self.views:
             raise ValueError("a scene needs at least one view")
-        self.views = [v if isinstance(v, SceneView) else SceneView(*v) for v in self.views]
+        self.views = scene_views(self.views)
         V = len(self.views)
         self.boxes = torch.as_tensor(self.boxes, dtype=torch.float32)
         self.has_box = torch.as_tensor(self.has_box, dtype=torch.bool)

@@ -334,7 +334,7 @@ def inverse_warp(heatmaps: Tensor, A: Tensor, in_size: tuple[int, int]) -> Tenso
     """
     W, H = in_size
     h, w = heatmaps.shape[-2:]
-    dst = _apply(A.to(torch.float32), _grid(H, W, A.device, torch.float32).expand(A.shape[0], H * W, 2))
+    dst = _apply(A.to(torch.float32), _grid(H, W, A.device, torch.float32))  # (N, H*W, 2)
     grid = _normalise(dst, (w, h)).view(-1, H, W, 2).to(heatmaps.dtype)
     return F.grid_sample(heatmaps, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 

@@ -28,7 +28,7 @@ import torch
 
 from posenet.cameras import Camera, rescale_pixels
 from posenet.net import augment as aug
-from posenet.scene import SceneView
+from posenet.scene import SceneView, scene_views
 
 Tensor = torch.Tensor
 MODALITIES = ("rgbd", "rgb", "depth")
@@ -249,7 +249,7 @@ def build_scene(
     """
     if not views:
         raise ValueError("a scene needs at least one view")
-    views = [v if isinstance(v, SceneView) else SceneView(*v) for v in views]  # (color, depth, camera) tuples too
+    views = scene_views(views)  # (color, depth, camera) tuples too
     V = len(views)
     boxes = torch.as_tensor(boxes, dtype=torch.float32)
     has_box = torch.as_tensor(has_box, dtype=torch.bool)

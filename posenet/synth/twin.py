@@ -156,11 +156,11 @@ def room_bounds(ctx: TwinContext, day: int, margin: float = 700.0) -> tuple[np.n
 
     The cameras hang on the walls and ceiling; people must stand inside, with ``margin`` mm to spare.
     """
-    pts = [cam_to_world(ctx.rig)[:, :3, 3], ctx.tables[day][0][None]]
+    cams = cam_to_world(ctx.rig)[:, :3, 3]
+    pts = [cams, ctx.tables[day][0][None]]
     pts += [ctx.world_points(kp) for f in ctx.frames if f.day == day for _, kp, _ in f.poses]
     pts = np.concatenate(pts)
     lo, hi = pts[:, :2].min(0) - margin, pts[:, :2].max(0) + margin
-    cams = cam_to_world(ctx.rig)[:, :3, 3]
     return (lo + hi) / 2, np.array([*((hi - lo) / 2), cams[:, 2].max() / 2 + 150])
 
 
@@ -240,6 +240,7 @@ def add_occluders(
     if not must_hide:
         return stats
     sil = silhouettes(frame, rig)
+    T = world_to_cam(rig)
     for v, i in sorted(must_hide):
         if (v, i) not in sil or sil[(v, i)][2] < min_pixels:
             stats["out_of_view"] += 1
@@ -256,7 +257,6 @@ def add_occluders(
             if corners[:, 2].max() > ceiling - 50 or corners[:, 2].min() < 100:
                 continue
             proj = project_boxes(rig, corners[None])[:, 0]  # (V, 4)
-            T = world_to_cam(rig)
             cost = 0.0
             for w, q in must_show:  # people who must stay visible: how much would this panel cover them?
                 if (w, q) not in sil or (w == v and q == i):

@@ -201,11 +201,12 @@ def cameras_info(rigs: DatasetRigs) -> dict:
     for d in sorted(rigs.rigs):
         rig = rigs.rigs[d]
         ref_inv = np.linalg.inv(rigs.ref_to_world[d])
+        Ks, poses = intrinsics(rig), cam_to_world(rig)
         for k, num in enumerate(rigs.cam_numbers[d]):
             if num in seen:
                 continue
             seen.add(num)
-            K = intrinsics(rig)[k]
+            K = Ks[k]
             intr.append(
                 {
                     "serialnumber": rig.names[k],
@@ -216,7 +217,7 @@ def cameras_info(rigs: DatasetRigs) -> dict:
                     "imagesize": [K.width, K.height],
                 }
             )
-            ext.append((ref_inv @ cam_to_world(rig)[k]).ravel().tolist())
+            ext.append((ref_inv @ poses[k]).ravel().tolist())
             ids.append(rig.names[k])
     first = min(rigs.rigs)
     return {
@@ -309,7 +310,7 @@ def render_job(job: Job) -> JobResult:
     twin: TwinContext | None = _STATE["twin"]
     t0 = time.perf_counter()
     frame, views, stats = frame_views(cfg, rigs, twin, job)
-    rig = rigs.rigs[job.day]
+    sizes = [(K.height, K.width) for K in intrinsics(rigs.rigs[job.day])]
     out = Path(cfg.out)
     world_to_ref = np.linalg.inv(rigs.ref_to_world[job.day])
     images, boxes = [], []
@@ -330,8 +331,8 @@ def render_job(job: Job) -> JobResult:
                 raise OSError(f"could not write {path}")
         images.append(
             {
-                "height": intrinsics(rig)[k].height,
-                "width": intrinsics(rig)[k].width,
+                "height": sizes[k][0],
+                "width": sizes[k][1],
                 "date_captured": f"2026-01-{job.day:02d} 08:{job.frame // 60 % 60:02d}:{job.frame % 60:02d}",
                 "file_name": name,
                 "id": iid,
