@@ -51,7 +51,14 @@ from detector.model import param_groups
 # The one module of `detector` that imports `pipeline` (tests/test_layering.py): the pseudo-labels need the
 # cross-view matcher. The detector that the pipeline runs never does.
 from pipeline.pseudo_boxes import PseudoBoxConfig, background_depth, pseudo_boxes
-from posenet.cli import add_annotations, add_data, add_days, add_threads
+from posenet.cli import (
+    add_annotations,
+    add_config_options,
+    add_data,
+    add_days,
+    add_threads,
+    config_options,
+)
 from posenet.training.adapt_losses import ema_update
 from posenet.training.schedule import Schedule
 from posenet.training.train import run_config
@@ -106,19 +113,27 @@ def label_target(
     frames: list[int],
     cfg: DetectorAdaptConfig,
     progress: bool = True,
-) -> dict[str, int]:
+) -> tuple[dict[str, int], list[bool]]:
     """Set the records' ``boxes`` of the target ``frames`` to the teacher's pseudo-labels (the teacher also runs
-    on their neighbouring frames, which confirm boxes over time); return the boxes by kind."""
+    on their neighbouring frames, which confirm boxes over time); return the boxes by kind and, per view of the
+    frames in order, whether it is unsettled (``pipeline.pseudo_boxes``)."""
     needed = sorted({j for i in frames for j in (i, *target.neighbours(i))})
+    floor = cfg.pseudo.low
+    if cfg.pseudo.unsettled_floor is not None:
+        floor = min(floor, cfg.pseudo.unsettled_floor)
     dets = {}
     for i in tqdm(needed, desc="teacher", unit="frame", leave=False, disable=not progress):
         records = target.frames[i].records
-        dets[i] = teacher.detect([r.color for r in records], [r.depth for r in records], cfg.pseudo.low)
+        dets[i] = teacher.detect([r.color for r in records], [r.depth for r in records], floor)
     counts: dict[str, int] = {}
+    unsettled: list[bool] = []
     for i in frames:
         frame = target.frames[i]
         V = len(frame.records)
-        near = [[dets[j][v].boxes for j in target.neighbours(i)] for v in range(V)]
+        near = [
+            [dets[j][v].boxes[dets[j][v].scores >= cfg.pseudo.low] for j in target.neighbours(i)]
+            for v in range(V)
+        ]
         backgrounds = None
         if cfg.background:
             backgrounds = [target.backgrounds[(frame.day, v)] for v in range(V)]
@@ -133,11 +148,12 @@ def label_target(
         )
         for rec, boxes in zip(frame.records, result.boxes, strict=True):
             rec.boxes = boxes
+        unsettled += result.unsettled
         for k, n in result.counts.items():
             counts[k] = counts.get(k, 0) + n
     counts["views"] = sum(len(target.frames[i].records) for i in frames)
     counts["boxes"] = sum(len(r.boxes) for i in frames for r in target.frames[i].records)
-    return counts
+    return counts, unsettled
 
 
 def rounds(num_frames: int, size: int, seed: int) -> list[list[int]]:
@@ -276,10 +292,11 @@ def adapt(cfg: DetectorAdaptConfig) -> dict:
             if schedule.spent:
                 break
             t0 = time.perf_counter()
-            counts = label_target(teacher, target, frames, cfg, cfg.progress)
+            counts, unsettled = label_target(teacher, target, frames, cfg, cfg.progress)
             schedule.elapsed += time.perf_counter() - t0
             seed = cfg.seed * 100003 + epoch * 1009 + r * 7919
             views = [j for i in frames for j in view_index[i]]
+            views = [j for j, doubt in zip(views, unsettled, strict=True) if not doubt]
             target_draw.restart(seed, views)
             source_draw.restart(seed + 17)
             steps_this = -(-len(views) // cfg.target_per_step)
@@ -375,16 +392,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--out", required=True, help="run folder: config.json, log.jsonl, last/")
     g = p.add_argument_group("pseudo-labels (pipeline.pseudo_boxes)")
-    g.add_argument(
-        "--high",
-        type=float,
-        default=q.high,
-        help="the confidence gate: a box this sure is kept once confirmed",
+    add_config_options(
+        g,
+        q,
+        {
+            "high": "the confidence gate: a box this sure is kept once confirmed",
+            "low": "weaker boxes only confirm, or are promoted by another view",
+            "unsettled_floor": "a view with a teacher box scored from this up to --high that no rule settled is "
+            "left out of its round, so that its person is not taught as background",
+        },
     )
-    g.add_argument(
-        "--low", type=float, default=q.low, help="weaker boxes only confirm, or are promoted by another view"
-    )
-    g.add_argument("--ema", type=float, default=d.ema, help="teacher momentum per step")
     g.add_argument(
         "--no-background", dest="background", action="store_false", help="no static-scene model from depth"
     )
@@ -397,20 +414,21 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--minutes", type=float, help="a budget of minutes instead of --epochs (the LR follows it)"
     )
-    g.add_argument("--lr", type=float, default=d.lr, help="AdamW learning rate of the transformer")
-    g.add_argument(
-        "--backbone-lr", type=float, default=d.backbone_lr, help="AdamW learning rate of the backbone"
+    add_config_options(
+        g,
+        d,
+        {
+            "ema": "teacher momentum per step",
+            "lr": "AdamW learning rate of the transformer",
+            "backbone_lr": "AdamW learning rate of the backbone",
+            "warmup": "fraction with a linear LR warm-up",
+            "decay_start": "fraction after which the LR decays",
+            "frames_per_round": "frames the teacher labels at a time",
+            "target_per_step": "target views per step",
+            "source_per_step": "labelled views per step",
+            "seed": "seed of the order and the augmentation",
+        },
     )
-    g.add_argument("--warmup", type=float, default=d.warmup, help="fraction with a linear LR warm-up")
-    g.add_argument(
-        "--decay-start", type=float, default=d.decay_start, help="fraction after which the LR decays"
-    )
-    g.add_argument(
-        "--frames-per-round", type=int, default=d.frames_per_round, help="frames the teacher labels at a time"
-    )
-    g.add_argument("--target-per-step", type=int, default=d.target_per_step, help="target views per step")
-    g.add_argument("--source-per-step", type=int, default=d.source_per_step, help="labelled views per step")
-    g.add_argument("--seed", type=int, default=d.seed, help="seed of the order and the augmentation")
     g = p.add_argument_group("runtime")
     add_threads(g)
     g.add_argument("--resume", action="store_true", help="continue the run in --out from last/")
@@ -422,9 +440,10 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
 
     def fresh() -> DetectorAdaptConfig:
-        fields = {f.name for f in dataclasses.fields(DetectorAdaptConfig)}
-        cfg = DetectorAdaptConfig(**{k: v for k, v in vars(args).items() if k in fields and v is not None})
-        cfg.pseudo = dataclasses.replace(cfg.pseudo, high=args.high, low=args.low)
+        cfg = DetectorAdaptConfig(**config_options(args, DetectorAdaptConfig))
+        cfg.pseudo = dataclasses.replace(
+            cfg.pseudo, high=args.high, low=args.low, unsettled_floor=args.unsettled_floor
+        )
         if not 0.0 <= cfg.pseudo.low <= cfg.pseudo.high <= 1.0:
             raise ValueError(f"need 0 <= --low <= --high <= 1, got --low {args.low} --high {args.high}")
         return cfg

@@ -36,7 +36,15 @@ from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
 from detector.model import ARCHS, DetectorConfig, build_detector, param_groups, preset
 from detector.predict import predict_records
-from posenet.cli import add_annotations, add_data, add_threads, annotations_path, set_threads
+from posenet.cli import (
+    add_annotations,
+    add_config_options,
+    add_data,
+    add_threads,
+    annotations_path,
+    config_options,
+    set_threads,
+)
 from posenet.data.mvor import read_annotation_json
 from posenet.net.checkpoint_files import train_state_file
 
@@ -282,26 +290,31 @@ def build_parser() -> argparse.ArgumentParser:
         help="images are resized to this width (with --init: fine-tune the checkpoint at this width)",
     )
     g = p.add_argument_group("training (defaults come from the preset)")
-    g.add_argument("--epochs", type=int)
-    g.add_argument("--batch-size", type=int)
-    g.add_argument("--lr", type=float)
-    g.add_argument("--backbone-lr", type=float)
-    g.add_argument("--weight-decay", type=float)
-    g.add_argument("--schedule", choices=["step", "cosine", "constant"])
-    g.add_argument("--warmup-steps", type=int)
-    g.add_argument("--num-workers", type=int)
-    g.add_argument("--seed", type=int)
-    g.add_argument(
-        "--dense-weight",
-        type=float,
-        help="weight of the training-only dense loss on the encoder tokens (detector/dense.py; 0 turns it off)",
+    add_config_options(
+        g,
+        TrainConfig,
+        {
+            "epochs": "passes over the training views",
+            "batch_size": "views per step",
+            "lr": "AdamW learning rate of the transformer",
+            "backbone_lr": "AdamW learning rate of the backbone",
+            "weight_decay": "AdamW weight decay",
+        },
     )
-    g.add_argument(
-        "--cache", action=argparse.BooleanOptionalAction, help="keep resized training views in memory"
-    )
-    g.add_argument("--max-minutes", type=float, help="stop (after saving a checkpoint) after this wall time")
-    g.add_argument(
-        "--eval-every", type=int, help="evaluate the held-out day every N epochs (0: only at the end)"
+    g.add_argument("--schedule", choices=["step", "cosine", "constant"], help="learning-rate schedule")
+    add_config_options(
+        g,
+        TrainConfig,
+        {
+            "warmup_steps": "steps with a linear LR warm-up",
+            "num_workers": "DataLoader workers",
+            "seed": "seed of the initialisation, order and augmentation",
+            "dense_weight": "weight of the training-only dense loss on the encoder tokens (detector/dense.py; "
+            "0 turns it off)",
+            "cache": "keep resized training views in memory",
+            "max_minutes": "stop (after saving a checkpoint) after this wall time",
+            "eval_every": "evaluate the held-out day every N epochs (0: only at the end)",
+        },
     )
     add_threads(g)
     g = p.add_argument_group("output")
@@ -323,28 +336,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
         saved = dict(read_config(out)["train"])
         saved.pop("train_images", None)
         base = TrainConfig(**{**saved, "augment": AugmentConfig(**saved["augment"])})
-    cfg = replace(
-        base,
-        **{
-            k: v
-            for k, v in {
-                "epochs": args.epochs,
-                "batch_size": args.batch_size,
-                "lr": args.lr,
-                "backbone_lr": args.backbone_lr,
-                "weight_decay": args.weight_decay,
-                "schedule": args.schedule,
-                "warmup_steps": args.warmup_steps,
-                "num_workers": args.num_workers,
-                "seed": args.seed,
-                "max_minutes": args.max_minutes,
-                "eval_every": args.eval_every,
-                "dense_weight": args.dense_weight,
-                "cache": args.cache,
-            }.items()
-            if v is not None
-        },
-    )
+    cfg = replace(base, **config_options(args, TrainConfig))
     annotations = read_annotation_json(args.annotations)
     all_days = sorted({r.day for r in load_records(annotations)})
     if args.train_days:

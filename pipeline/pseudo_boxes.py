@@ -19,6 +19,11 @@ only what the recording gives for free:
   pixels are less than ``min_foreground`` in front of that background (by ``foreground_mm``) is background. A
   person who stands in one place for more than ``1 - background_quantile`` of the day becomes background there
   too: with 0.9, a tenth of the day.
+- **Unsettled views.** A view where the teacher has a box scored from ``unsettled_floor`` up to the gate that no
+  rule kept, that no kept box overlaps and that does not lie on the static scene holds someone the rules could
+  neither confirm nor reject. Trained on, that person would be taught as background (the adapted detector
+  would find fewer people), so ``PseudoBoxes.unsettled`` marks the view and ``detector.adapt`` leaves it out of
+  that round.
 
 Boxes are xyxy pixels of the depth images given (``posenet.boxes``); depth uint16 mm, 0 unknown; cameras as
 ``posenet.cameras`` (T(v->0), the reference frame is camera 0's).
@@ -56,6 +61,10 @@ class PseudoBoxConfig:
     min_visible: float = 0.35  # share of a person's projected points seen, below which no box is filled in
     min_points: int = 20  # seen points a filled-in box needs
     snap_iou: float = 0.4  # a teacher box overlapping a filled-in box this much replaces it
+    # A view holding a teacher box scored from this up to the gate that no rule settled (it overlaps no kept box
+    # by snap_iou, and does not lie on the static scene) is unsettled: trained on, its unkept person would be taught as background, so the adaptation
+    # leaves the view out of that round. None: every view is trained on (docs/detector.md measures both).
+    unsettled_floor: float | None = None
 
 
 @dataclass
@@ -66,11 +75,14 @@ class PseudoBoxes:
         boxes: V arrays ``(M_v, 4)`` float32 xyxy pixels.
         counts: ``kept`` (confirmed teacher boxes), ``filled`` (projected from other views), ``snapped`` (a filled
             box replaced by a teacher box below the gate), ``static`` (dropped as background), ``unconfirmed``
-            (dropped: no other view, no neighbouring frame).
+            (dropped: no other view, no neighbouring frame), ``unsettled`` (views with a box no rule settled).
+        unsettled: V bools: the view holds a teacher box scored from ``unsettled_floor`` up to the gate that
+            overlaps no kept box (a person the rules neither kept nor rejected).
     """
 
     boxes: list[np.ndarray]
     counts: dict[str, int] = field(default_factory=dict)
+    unsettled: list[bool] = field(default_factory=list)
 
 
 def background_depth(depths: np.ndarray, quantile: float = 0.9) -> np.ndarray:
@@ -185,7 +197,8 @@ def pseudo_boxes(
     """One frame's training boxes from the teacher's (see the module docstring).
 
     Args:
-        boxes, scores: per view the teacher's ``(K_v, 4)`` xyxy boxes and ``(K_v,)`` scores (at least ``low``).
+        boxes, scores: per view the teacher's ``(K_v, 4)`` xyxy boxes and ``(K_v,)`` scores (at least ``low``, or
+            ``unsettled_floor`` when that is lower: boxes below ``low`` only mark their view unsettled).
         depths: per view ``(H, W)`` uint16 mm; ``cameras``: a camera of batch shape ``(V,)`` for those images.
         backgrounds: per view the camera's static depth ``(H, W)`` (:func:`background_depth`), or None.
         neighbours: per view the teacher's boxes ``(M, 4)`` of the neighbouring frames of the same camera.
@@ -196,11 +209,16 @@ def pseudo_boxes(
             f"pseudo_boxes needs one entry per view: {V} box lists, {len(scores)} score lists, {len(depths)} "
             f"depths, {len(neighbours)} neighbour lists, cameras of batch shape {tuple(cameras.intrinsics.shape[:-1])}"
         )
-    counts = dict.fromkeys(("kept", "filled", "snapped", "static", "unconfirmed"), 0)
-    cand, cand_scores = [], []
+    counts = dict.fromkeys(("kept", "filled", "snapped", "static", "unconfirmed", "unsettled"), 0)
+    cand, cand_scores, doubtful = [], [], []
     for v in range(V):
         b = np.asarray(boxes[v], np.float64).reshape(-1, 4)
         s = np.asarray(scores[v], np.float64).reshape(-1)
+        floor = cfg.unsettled_floor
+        d = b[(s >= floor) & (s < cfg.high)] if floor is not None else np.zeros((0, 4))
+        if backgrounds is not None and len(d):  # on the static scene: settled, as background
+            d = d[foreground_share(d, depths[v], backgrounds[v], cfg.foreground_mm) >= cfg.min_foreground]
+        doubtful.append(d)
         keep = s >= cfg.low
         b, s = b[keep], s[keep]
         if backgrounds is not None and len(b):
@@ -220,8 +238,10 @@ def pseudo_boxes(
         for (v, k), sure in zip(members, strong, strict=True):
             box = cand[v][k]
             if sure:  # another view, or the previous or next frame of this camera, must confirm it
-                ok = cand_scores[v][k] >= cfg.certain or len(members) >= 2 or bool(
-                    confirmed_in_time(box[None], neighbours[v], cfg.neighbour_iou)[0]
+                ok = (
+                    cand_scores[v][k] >= cfg.certain
+                    or len(members) >= 2
+                    or bool(confirmed_in_time(box[None], neighbours[v], cfg.neighbour_iou)[0])
                 )
             else:  # below the gate: only a confident box of the same person in another view promotes it
                 ok = any(strong)
@@ -254,4 +274,14 @@ def pseudo_boxes(
             kept[v].append(box)
             counts["filled"] += 1
     out = [np.asarray(k, np.float32).reshape(-1, 4) for k in kept]
-    return PseudoBoxes(out, counts)
+    unsettled = []
+    for v in range(V):
+        mine = out[v].astype(np.float64)
+        if not len(doubtful[v]):
+            unsettled.append(False)
+        elif not len(mine):
+            unsettled.append(True)
+        else:
+            unsettled.append(bool((iou_xyxy(doubtful[v], mine).max(axis=1) < cfg.snap_iou).any()))
+    counts["unsettled"] = sum(unsettled)
+    return PseudoBoxes(out, counts, unsettled)

@@ -45,7 +45,14 @@ import torch
 from safetensors.torch import load_file
 from tqdm import tqdm
 
-from posenet.cli import add_annotations, add_data, add_days, add_threads
+from posenet.cli import (
+    add_annotations,
+    add_config_options,
+    add_data,
+    add_days,
+    add_threads,
+    config_options,
+)
 from posenet.evaluation.predict import read_subsample
 from posenet.net.augment import AugmentConfig
 from posenet.net.checkpoint import (
@@ -89,7 +96,9 @@ class AdaptConfig:
     # service read), e.g. 2 for 640x480 views and the shipped 320x240 network.
     subsample: int | None = None
     epochs: int = 5
-    minutes: float | None = None  # a budget of adaptation minutes (posenet.training.schedule); overrides epochs
+    minutes: float | None = (
+        None  # a budget of adaptation minutes (posenet.training.schedule); overrides epochs
+    )
     clock: str = "wall"
     lr: float = (
         2e-4  # a fine-tune: a fifth of training's 1e-3, so that the first noisy targets do little harm
@@ -480,28 +489,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     g.add_argument("--out", required=True, help="run folder: config.json, log.jsonl, last/")
     g = p.add_argument_group("losses (weights; 0 switches one off)")
-    g.add_argument(
-        "--consistency", type=float, default=d.consistency, help="each view's estimate vs the fused one"
-    )
-    g.add_argument(
-        "--pseudo", type=float, default=d.pseudo, help="MPJPE to the EMA teacher's confident estimates"
-    )
-    g.add_argument(
-        "--bones", type=float, default=d.bones, help="bone lengths within the source's mean +- std"
-    )
-    g.add_argument(
-        "--source", type=float, default=d.source, help="the paper's MPJPE on the --source-data scenes"
-    )
-    g.add_argument("--ema", type=float, default=d.ema, help="teacher momentum per step")
-    g.add_argument(
-        "--pseudo-max-uncertainty",
-        type=float,
-        default=d.pseudo_max_uncertainty,
-        help="mm: a teacher joint is a target when its spread + half its flip disagreement is at most this",
-    )
-    g.add_argument("--bone-tolerance", type=float, default=d.bone_tolerance, help="free band, in source std")
-    g.add_argument(
-        "--min-views", type=int, default=d.min_views, help="views a person needs for --consistency"
+    add_config_options(
+        g,
+        d,
+        {
+            "consistency": "each view's estimate vs the fused one",
+            "pseudo": "MPJPE to the EMA teacher's confident estimates",
+            "bones": "bone lengths within the source's mean +- std",
+            "source": "the paper's MPJPE on the --source-data scenes",
+            "ema": "teacher momentum per step",
+            "pseudo_max_uncertainty": "mm: a teacher joint is a target when its spread + half its flip "
+            "disagreement is at most this",
+            "bone_tolerance": "free band, in source std",
+            "min_views": "views a person needs for --consistency",
+        },
     )
     g = p.add_argument_group("optimisation")
     g.add_argument("--epochs", type=int, help=f"passes over the target frames (default {d.epochs})")
@@ -509,14 +510,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--minutes", type=float, help="a budget of minutes instead of --epochs (the LR follows it)"
     )
     g.add_argument("--clock", choices=("wall", "cpu"), default=d.clock, help="what --minutes counts")
-    g.add_argument("--lr", type=float, default=d.lr, help="Adam learning rate")
-    g.add_argument("--warmup", type=float, default=d.warmup, help="fraction with a linear LR warm-up")
-    g.add_argument(
-        "--decay-start", type=float, default=d.decay_start, help="fraction after which the LR decays"
+    add_config_options(
+        g,
+        d,
+        {
+            "lr": "Adam learning rate",
+            "warmup": "fraction with a linear LR warm-up",
+            "decay_start": "fraction after which the LR decays",
+            "scenes_per_step": "target scenes per step",
+            "source_per_step": "labelled scenes per step",
+            "seed": "seed of the order and the augmentation",
+        },
     )
-    g.add_argument("--scenes-per-step", type=int, default=d.scenes_per_step, help="target scenes per step")
-    g.add_argument("--source-per-step", type=int, default=d.source_per_step, help="labelled scenes per step")
-    g.add_argument("--seed", type=int, default=d.seed, help="seed of the order and the augmentation")
     g = p.add_argument_group("runtime")
     add_threads(g)
     g.add_argument("--device", help="cpu or cuda (default: cuda if available)")
@@ -529,8 +534,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
 
     def fresh() -> AdaptConfig:
-        fields = {f.name for f in dataclasses.fields(AdaptConfig)}
-        return AdaptConfig(**{k: v for k, v in vars(args).items() if k in fields and v is not None})
+        return AdaptConfig(**config_options(args, AdaptConfig))
 
     adapt(run_config(args, AdaptConfig.from_dict, ("epochs", "minutes", "threads", "device"), fresh))
     return 0

@@ -36,7 +36,7 @@ import torch.distributed as dist
 from tqdm import tqdm
 
 from posenet.boxes import person_ids
-from posenet.cli import add_annotations, add_data, add_threads
+from posenet.cli import add_annotations, add_config_options, add_data, add_threads, config_options
 from posenet.net.augment import AugmentConfig, detector_like_boxes
 from posenet.net.checkpoint import save_checkpoint, sectioned, training_config
 from posenet.net.inputs import InputConfig, build_scene, record_read_size
@@ -138,12 +138,7 @@ def resolve_config(args: argparse.Namespace) -> TrainConfig:
         model["precision"] = os.environ["ORPOSE_PRECISION"]
     if args.loss is not None:
         model["aggregation"] = args.loss
-    augment = preset.pop("augment")
-    for key in ("flip", "crop", "color", "occlude", "box_noise", "color_drop"):
-        if getattr(args, key) is not None:
-            augment[key] = getattr(args, key)
-    if args.rotate is not None:
-        augment["rotate_deg"] = args.rotate
+    augment = {**preset.pop("augment"), **config_options(args, AugmentConfig)}
     top = {f.name for f in dataclasses.fields(TrainConfig)} - {
         "model",
         "augment",
@@ -602,57 +597,51 @@ def build_parser() -> argparse.ArgumentParser:
         "--channels-last", action=argparse.BooleanOptionalAction, help="channels_last memory format"
     )
     g = p.add_argument_group("optimisation")
-    g.add_argument("--epochs", type=int, help="passes over the training frames")
-    g.add_argument(
-        "--minutes",
-        type=float,
-        help="a budget of training minutes instead of --epochs: the LR schedule follows the elapsed time",
-    )
-    g.add_argument("--warmup", type=float, help="fraction of training with a linear LR warm-up (default 0)")
-    g.add_argument(
-        "--view-loss",
-        type=float,
-        help="weight of an extra MPJPE on each view's own estimate (the single-view skeletons the skeleton "
-        "matcher compares) beside the fused one (default 0: the paper's loss alone; extension)",
+    add_config_options(
+        g,
+        TrainConfig,
+        {
+            "epochs": "passes over the training frames",
+            "minutes": "a budget of training minutes instead of --epochs: the LR schedule follows the elapsed "
+            "time",
+            "warmup": "fraction of training with a linear LR warm-up (default 0)",
+            "view_loss": "weight of an extra MPJPE on each view's own estimate (the single-view skeletons the "
+            "skeleton matcher compares) beside the fused one (default 0: the paper's loss alone; extension)",
+        },
     )
     g.add_argument(
         "--clock",
         choices=("wall", "cpu"),
         help="what --minutes counts: wall (default) or cpu (this process's CPU time; immune to a loaded machine)",
     )
-    g.add_argument("--lr", type=float, help="Adam learning rate (paper: 1e-3)")
-    g.add_argument("--scenes-per-step", type=int, help="scenes per optimiser step (paper: 1)")
-    g.add_argument(
-        "--decay-start", type=float, help="fraction of training after which the LR decays to 0 (cosine)"
+    add_config_options(
+        g,
+        TrainConfig,
+        {
+            "lr": "Adam learning rate (paper: 1e-3)",
+            "scenes_per_step": "scenes per optimiser step (paper: 1)",
+            "decay_start": "fraction of training after which the LR decays to 0 (cosine)",
+            "val_every": "epochs between validations on the held-out day",
+            "val_every_minutes": "with --minutes: minutes between validations (default budget/6)",
+            "seed": "seed of the initialisation, shuffling and augmentation",
+        },
     )
-    g.add_argument("--val-every", type=int, help="epochs between validations on the held-out day")
-    g.add_argument(
-        "--val-every-minutes",
-        type=float,
-        help="with --minutes: minutes between validations (default budget/6)",
-    )
-    g.add_argument("--seed", type=int, help="seed of the initialisation, shuffling and augmentation")
     g = p.add_argument_group("augmentation (each switchable)")
-    g.add_argument("--flip", action=argparse.BooleanOptionalAction, help="horizontal flip, p = 0.5")
-    g.add_argument(
-        "--crop", action=argparse.BooleanOptionalAction, help="random crop (cpu: crop shift/scale)"
-    )
-    g.add_argument("--rotate", type=float, help="max rotation in degrees (0 disables; paper: 15)")
-    g.add_argument(
-        "--color", action=argparse.BooleanOptionalAction, help="brightness/contrast/saturation jitter"
-    )
-    g.add_argument("--occlude", type=float, help="probability of an occluder per crop (extension; 0: off)")
-    g.add_argument(
-        "--color-drop",
-        type=float,
-        help="probability per person-view image of replacing its colour by mid grey, so that the network also "
-        "learns from depth alone (extension for looks it never saw; 0: off)",
-    )
-    g.add_argument(
-        "--box-noise",
-        type=float,
-        help="probability per box of a detector-like box instead of the reference one: shifted, too large or "
-        "small, truncated, or holding a second person (extension for detector mode; 0: off)",
+    add_config_options(
+        g,
+        AugmentConfig,
+        {
+            "flip": "horizontal flip, p = 0.5",
+            "crop": "random crop (cpu: crop shift/scale)",
+            "rotate_deg": "max rotation in degrees (0 disables; paper: 15)",
+            "color": "brightness/contrast/saturation jitter",
+            "occlude": "probability of an occluder per crop (extension; 0: off)",
+            "color_drop": "probability per person-view image of replacing its colour by mid grey, so that the "
+            "network also learns from depth alone (extension for looks it never saw; 0: off)",
+            "box_noise": "probability per box of a detector-like box instead of the reference one: shifted, too "
+            "large or small, truncated, or holding a second person (extension for detector mode; 0: off)",
+        },
+        flags={"rotate_deg": "--rotate"},
     )
     g = p.add_argument_group("runtime")
     add_threads(g)

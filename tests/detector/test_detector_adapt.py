@@ -171,6 +171,35 @@ def test_the_static_scene_is_learnt_from_depth_and_never_becomes_a_box():
     assert len(sure.boxes[0]) == 2  # the detector's certainty outweighs the background (static_certain)
 
 
+def test_a_view_with_a_box_no_rule_settled_is_marked_unsettled():
+    """A weak box (0.3) on someone in front of the static scene that no kept box overlaps leaves its view
+    unsettled; one that overlaps a kept box, one on the static scene and one below the floor do not."""
+    from posenet.cameras import Camera
+
+    frames = np.full((4, 60, 80), 4000, np.uint16)
+    frames[:, 40:55, 5:35] = 3000  # the table, always there
+    frames[0, 10:50, 40:50] = 2000  # a person
+    frames[0, 10:50, 60:70] = 2000  # another person
+    bg = background_depth(frames)
+    cam = Camera.stack([Camera.create(75.0, 75.0, 39.5, 29.5, size=(80, 60))])
+    table, a, b = np.array([5.0, 40, 34, 54]), np.array([40.0, 10, 49, 49]), np.array([60.0, 10, 69, 49])
+    cfg = PseudoBoxConfig(certain=0.5, unsettled_floor=0.1)
+
+    def run(boxes, scores, c=cfg):
+        out = pseudo_boxes([np.array(boxes)], [np.array(scores)], [frames[0]], cam, [bg], [[]], c)
+        return out.unsettled[0], out.counts["unsettled"]
+
+    assert run([a, b], [0.9, 0.3]) == (True, 1)  # b: neither kept nor rejected
+    assert run([a, b], [0.9, 0.05]) == (False, 0)  # below the floor
+    assert run([a, a + 1.0], [0.9, 0.3]) == (False, 0)  # the weak box is the kept person's
+    assert run([a, table], [0.9, 0.3]) == (False, 0)  # the weak box lies on the static scene: background
+    assert run([b], [0.3]) == (True, 1)  # nothing kept at all
+    assert run([a, b], [0.9, 0.3], PseudoBoxConfig(certain=0.5, unsettled_floor=None)) == (False, 0)
+    # without a background model, the weak box on the table is unsettled too
+    out = pseudo_boxes([np.array([a, table])], [np.array([0.9, 0.3])], [frames[0]], cam, None, [[]], cfg)
+    assert out.unsettled == [True]
+
+
 # ----------------------------------------------------------------------------- the CLI
 def _same_weights(a, b) -> bool:
     """Bit-identical tensors (the file's header may order its metadata differently)."""
