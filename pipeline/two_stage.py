@@ -41,7 +41,7 @@ from posenet.boxes import ground_truth_ids, hull, identified
 from posenet.data.sample import Sample
 from posenet.evaluation.evaluate import prediction_record
 from posenet.net.lifting import JointEstimate
-from posenet.scene import Scene, SceneView
+from posenet.scene import PersonPose, Scene, SceneView
 
 
 @dataclass
@@ -79,18 +79,16 @@ class PipelineConfig:
             )
 
 
-@dataclass
-class PersonResult:
-    """One person of a scene.
+@dataclass(kw_only=True)
+class PersonResult(PersonPose):
+    """One person of a scene: its pose (:class:`posenet.scene.PersonPose`: ``joints`` (J, 3) mm in the reference
+    frame, ``spread_mm`` (J,), ``confidence`` (J,) calibrated from the spread and the number of supporting views)
+    and where the pipeline found it.
 
     Attributes:
         id: the client's person id (reference-box mode with ids) or an index within the scene.
-        joints: (J, 3) float mm, reference frame.
-        confidence: (J,) float in [0, 1], the calibrated probability that each joint lies within 10 cm
-            (``posenet.net.calibration``, from the spread and the number of supporting views).
         boxes: V entries: the person's (4,) xyxy box in that view, or None where it has none.
         scores: V entries: the detector score of that box, or None (reference box or no box).
-        spread_mm: (J,) float, the pose network's per-joint spread in mm (smaller is more certain).
         box_indices: V entries: the indices, among the boxes of that view given to (or found by) the pipeline, of
             the person's boxes there (one, several when the skeleton matcher merged a split person, or none).
         unsure: every box of this person scored below the detector's threshold: not a person of the frame on
@@ -99,11 +97,8 @@ class PersonResult:
     """
 
     id: int
-    joints: np.ndarray
-    confidence: np.ndarray
     boxes: list[np.ndarray | None]
     scores: list[float | None]
-    spread_mm: np.ndarray = field(default_factory=lambda: np.zeros(0))
     box_indices: list[tuple[int, ...]] = field(default_factory=list)
     unsure: bool = False
 
@@ -425,33 +420,31 @@ class ScenePipeline:
         if heat is None:  # ids and the centre matcher give per view one box index, or -1
             groups = [[() if k < 0 else (k,) for k in group] for group in groups]
         first_unsure = len(groups) - len(unsure_groups)
-        persons = [
-            PersonResult(
-                pid, np.zeros(0), np.zeros(0), *self._person_boxes(held, boxes, scores), box_indices=held,
-                unsure=p >= first_unsure,
-            )
-            for p, (pid, held) in enumerate(zip(ids, groups, strict=True))
-        ]  # fmt: skip
+        found = [self._person_boxes(held, boxes, scores) for held in groups]  # per person (boxes, scores)
+        persons = []
         t0 = time.perf_counter()
-        if persons:
+        if groups:
             # The skeleton matcher's heatmaps: fuse its groups without another U-Net pass.
             if heat is not None:
                 prediction = fused(heat, matched, unsure_groups, boxes, sure)
             else:
-                scene = Scene.from_person_boxes(views, [p.boxes for p in persons], [p.id for p in persons])
-                prediction = self.pose.predict(scene)
+                prediction = self.pose.predict(Scene.from_person_boxes(views, [b for b, _ in found], ids))
             joints = np.asarray(prediction.joints, dtype=np.float64)  # (P, J, 3)
             spread = torch.as_tensor(prediction.spread_mm, dtype=torch.float64).cpu()  # (P, J) mm
-            support = torch.tensor([len(p.support) for p in persons])  # (P,)
+            support = torch.tensor([sum(b is not None for b in person_boxes) for person_boxes, _ in found])
             confidence = self.pose.calibration(
                 spread, support, torch.as_tensor(joints)
             ).numpy()  # (P, J) in [0, 1]
-            for p, person in enumerate(persons):
-                person.joints, person.confidence = joints[p], confidence[p]
-                person.spread_mm = spread[p].numpy()
             # A person whose boxes hold no valid depth has no lifted points: its joints mean nothing.
             has_points = np.asarray(prediction.has_points, dtype=bool)  # (P,)
-            persons = [p for p, ok in zip(persons, has_points, strict=True) if ok]
+            persons = [
+                PersonResult(
+                    joints[p], spread[p].numpy(), confidence[p], id=pid, boxes=person_boxes,
+                    scores=person_scores, box_indices=held, unsure=p >= first_unsure,
+                )
+                for p, (pid, held, (person_boxes, person_scores)) in enumerate(zip(ids, groups, found, strict=True))
+                if has_points[p]
+            ]  # fmt: skip
         timings["pose"] += _ms(t0)
         mode = "detector" if scores[0] is not None else "reference_boxes"
         return SceneResult(mode, persons, timings, unsure_ms)

@@ -1,4 +1,5 @@
-"""The scene contract: V RGB-D views with their cameras, and the persons to estimate as boxes in those views.
+"""The scene contract: V RGB-D views with their cameras and the persons to estimate as boxes in those views
+(:class:`Scene`) go in; one :class:`PersonPose` per person comes out.
 
 Every path to the pose network builds a :class:`Scene`: the dataset readers' samples (:meth:`Scene.from_sample`,
 training, validation, offline prediction), the service's requests and the cross-view matchers (per person, V
@@ -14,6 +15,8 @@ Usage::
     scene = Scene.from_sample(sample, "boxed")                            # a posenet.data.sample.Sample
     scene.boxes      # (P, V, 4) float32 xyxy (zeros where has_box is False)
     scene.has_box    # (P, V) bool
+    for pose in estimator.predict(scene).persons():   # PersonPose: joints (J, 3) mm, spread_mm, confidence
+        ...
 """
 
 from __future__ import annotations
@@ -29,6 +32,25 @@ from posenet.cameras import Camera
 from posenet.skeleton import NUM_JOINTS
 
 Tensor = torch.Tensor
+
+
+@dataclass
+class PersonPose:
+    """One person's 3D pose: the one record of an estimate. The pose network's per-person rows
+    (``posenet.net.infer.PosePrediction.persons``) are these; the pipeline's persons
+    (``pipeline.two_stage.PersonResult``) are these with their boxes and id added; the tracker reads them and the
+    service's ``schemas.Person`` is their JSON form.
+
+    Attributes:
+        joints: (J, 3) float64 mm, the reference frame (camera 0's).
+        spread_mm: (J,) float64 mm, the spread of each joint's lifted heatmap points (smaller is more certain).
+        confidence: (J,) float64 in [0, 1], the calibrated probability that each joint lies within 10 cm of the
+            truth (``posenet.net.calibration``): the same meaning everywhere.
+    """
+
+    joints: np.ndarray
+    spread_mm: np.ndarray
+    confidence: np.ndarray
 
 
 @dataclass

@@ -39,12 +39,10 @@ def predict_samples(estimator: PoseEstimator, samples, scenes_per_batch: int = 4
 
     def flush() -> None:
         for scene, pred in zip(pending, estimator.predict(pending), strict=True):
-            for k, pid in enumerate(scene.person_ids.tolist()):
-                if not bool(pred.has_points[k]):
+            for pid, pose, ok in zip(scene.person_ids.tolist(), pred.persons(), pred.has_points, strict=True):
+                if not bool(ok):
                     continue  # no pixel with depth in any of its boxes: nothing to lift
-                preds.append(
-                    prediction_record(scene.id, pid, pred.joints[k], pred.spread_mm[k], pred.confidence[k])
-                )
+                preds.append(prediction_record(scene.id, pid, pose.joints, pose.spread_mm, pose.confidence))
         pending.clear()
 
     for sample in tqdm(samples, desc="predict", disable=not progress, leave=False):
@@ -90,7 +88,9 @@ def build_parser() -> argparse.ArgumentParser:
         "reference person boxes of the annotation file, and write them in posenet.evaluation.evaluate's format.",
     )
     add_data(p)
-    add_annotations(p, help="MVOR-format annotation json: boxes, cameras, frames (default: DATA/annotations.json)")
+    add_annotations(
+        p, help="MVOR-format annotation json: boxes, cameras, frames (default: DATA/annotations.json)"
+    )
     p.add_argument(
         "--checkpoint",
         default=None,
@@ -104,7 +104,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_threads(p)
     p.add_argument("--device", default="cpu", help="torch device, e.g. cpu or cuda")
     p.add_argument(
-        "--precision", choices=PRECISIONS, default="auto", help="how this machine runs it (posenet.runtime.execution)"
+        "--precision",
+        choices=PRECISIONS,
+        default="auto",
+        help="how this machine runs it (posenet.runtime.execution)",
     )
     p.add_argument(
         "--flip-test",

@@ -31,14 +31,15 @@ from posenet.net.checkpoint import load_checkpoint
 from posenet.net.inputs import SceneInput, build_scene
 from posenet.net.model import PoseNet, predict_scenes
 from posenet.runtime.graphs import Backend, export_onnx, load_runner
-from posenet.scene import Scene, SceneView
+from posenet.scene import PersonPose, Scene, SceneView
 
 Tensor = torch.Tensor
 
 
 @dataclass
 class PosePrediction:
-    """joints (P, J, 3) mm reference frame; spread_mm (P, J) mm (smaller = more certain); has_points (P,)
+    """The pose network's estimates of a scene's P persons, batched (:meth:`persons` gives one record each).
+    joints (P, J, 3) mm reference frame; spread_mm (P, J) mm (smaller = more certain); has_points (P,)
     whether any pixel could vote (else joints are meaningless); confidence (P, J) in [0, 1], the checkpoint's
     calibration of the spread (``posenet.net.calibration``); heatmaps (P, V, J, M) logits at the points,
     with their uv (P or 1, V, M, 2), depth and valid mask, when asked for (visualisation)."""
@@ -51,6 +52,14 @@ class PosePrediction:
     uv: Tensor | None = None
     depth: Tensor | None = None
     valid: Tensor | None = None
+
+    def persons(self) -> list[PersonPose]:
+        """The P persons as :class:`posenet.scene.PersonPose` records (float64 NumPy), in order; check
+        ``has_points`` before trusting one."""
+        rows = (
+            np.asarray(x.detach().cpu(), np.float64) for x in (self.joints, self.spread_mm, self.confidence)
+        )
+        return [PersonPose(j, s, c) for j, s, c in zip(*rows, strict=True)]
 
 
 class PoseEstimator:

@@ -49,6 +49,18 @@ def test_batched_equals_per_person(scene, mode):
         together.confidence, torch.cat([a.confidence for a in alone]), atol=1e-3, rtol=1e-4
     )
     assert together.has_points.all() and (together.confidence > 0).all()
+    # one PersonPose record per person, the batch's rows
+    records = together.persons()
+    assert len(records) == 3 and len(empty_persons(est, views)) == 0
+    for k, pose in enumerate(records):
+        assert pose.joints.shape == (10, 3) and pose.joints.dtype == np.float64
+        np.testing.assert_array_equal(pose.joints, together.joints[k].double().numpy())
+        np.testing.assert_array_equal(pose.spread_mm, together.spread_mm[k].double().numpy())
+        np.testing.assert_array_equal(pose.confidence, together.confidence[k].double().numpy())
+
+
+def empty_persons(est, views):
+    return est.predict(Scene.from_person_boxes(views, [])).persons()
 
 
 @pytest.mark.parametrize("mode", ["full", "crop"])

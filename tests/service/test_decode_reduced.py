@@ -66,8 +66,8 @@ def test_cameras_and_boxes_follow_and_answers_keep_the_pixels_as_sent():
         np.testing.assert_allclose(b, (a + 0.5) / 2 - 0.5, atol=1e-4)
     # Detector mode: boxes found in the reduced images are answered in the pixels of the images as sent.
     detect = validate_scene(parse_scene((FRAME / "scene.json").read_text(), limits), _files(), limits, True)
-    person = PersonResult(0, np.zeros((10, 3)), np.zeros(10), [np.array([10.0, 20.0, 60.0, 120.0]), None, None],
-                          [0.9, None, None])  # fmt: skip
+    person = PersonResult(np.zeros((10, 3)), np.zeros(10), np.zeros(10), id=0,
+                          boxes=[np.array([10.0, 20.0, 60.0, 120.0]), None, None], scores=[0.9, None, None])  # fmt: skip
     _restore_sent_boxes([person], detect)
     np.testing.assert_allclose(person.boxes[0], [20.5, 40.5, 120.5, 240.5])
     assert SceneResult("detector", [person]).persons[0].support == [0]

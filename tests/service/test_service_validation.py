@@ -198,7 +198,8 @@ def test_a_non_finite_estimate_is_never_sent_as_null():
     scene = validate([{"camera": camera(), "boxes": [[1, 2, 30, 40]], "person_ids": [7]}], parts(1))
     joints = np.zeros((10, 3))
     joints[3, 1] = np.nan
-    person = PersonResult(7, joints, np.ones(10), [scene.boxes[0][0]], [None], np.full(10, 40.0), [(0,)])
+    person = PersonResult(joints, np.full(10, 40.0), np.ones(10), id=7, boxes=[scene.boxes[0][0]], scores=[None],
+                          box_indices=[(0,)])  # fmt: skip
     result = SceneResult("reference_boxes", [person], {"detect": 0.0, "match": 0.0, "pose": 1.0})
     with pytest.raises(InputError, match="person 7 is not finite: check the cameras") as err:
         encode(result, scene, 1.0, 0.0)
