@@ -62,8 +62,9 @@ class PseudoBoxConfig:
     min_points: int = 20  # seen points a filled-in box needs
     snap_iou: float = 0.4  # a teacher box overlapping a filled-in box this much replaces it
     # A view holding a teacher box scored from this up to the gate that no rule settled (it overlaps no kept box
-    # by snap_iou, and does not lie on the static scene) is unsettled: trained on, its unkept person would be taught as background, so the adaptation
-    # leaves the view out of that round. None: every view is trained on (docs/detector.md measures both).
+    # by snap_iou and does not lie on the static scene) is unsettled: trained on, its unkept person would be
+    # taught as background, so the adaptation leaves the view out of that round. None (the default): every view
+    # is trained on; at 0.1 it did not help on the alt look (docs/detector.md measures both).
     unsettled_floor: float | None = None
 
 
