@@ -86,7 +86,10 @@ class DetectorAdaptConfig:
     # Frames labelled by the teacher at a time, then trained on: the teacher's labels stay fresh, and a time budget
     # or an interruption loses at most one round (a checkpoint follows each)
     frames_per_round: int = 64
-    target_per_step: int = 4  # target views (pseudo-labelled) per step
+    # Target views (pseudo-labelled) per step. 0: a control run on the source views alone, taking the steps (and
+    # the learning-rate schedule) that a run at 4 target views per step takes, without labelling the target: what
+    # the fine-tune itself does to the detector, against which an adaptation's gain is judged
+    target_per_step: int = 4
     source_per_step: int = 4  # labelled rendered views per step
     ema: float = 0.99  # teacher momentum per step: it averages the student over ~100 steps
     background: bool = True  # each camera's static depth over the day (pipeline.pseudo_boxes)
@@ -236,7 +239,7 @@ def adapt(cfg: DetectorAdaptConfig) -> dict:
     base_lrs = [g["lr"] for g in groups]
     optimiser = torch.optim.AdamW(groups, lr=cfg.lr, weight_decay=cfg.weight_decay)
     steps_per_epoch = -(
-        -len(target_set) // cfg.target_per_step
+        -len(target_set) // (cfg.target_per_step or 4)
     )  # the rounds' steps: one per target_per_step views
     schedule = Schedule(cfg.lr, cfg.epochs * steps_per_epoch, cfg.decay_start, cfg.warmup, cfg.minutes)
     teacher_model = copy.deepcopy(student).eval().requires_grad_(False)
@@ -292,14 +295,17 @@ def adapt(cfg: DetectorAdaptConfig) -> dict:
             if schedule.spent:
                 break
             t0 = time.perf_counter()
-            counts, unsettled = label_target(teacher, target, frames, cfg, cfg.progress)
+            views = [j for i in frames for j in view_index[i]]
+            steps_this = -(-len(views) // (cfg.target_per_step or 4))
+            counts: dict[str, int] = {}
+            if cfg.target_per_step:
+                counts, unsettled = label_target(teacher, target, frames, cfg, cfg.progress)
+                views = [j for j, doubt in zip(views, unsettled, strict=True) if not doubt]
+                steps_this = -(-len(views) // cfg.target_per_step)
             schedule.elapsed += time.perf_counter() - t0
             seed = cfg.seed * 100003 + epoch * 1009 + r * 7919
-            views = [j for i in frames for j in view_index[i]]
-            views = [j for j, doubt in zip(views, unsettled, strict=True) if not doubt]
             target_draw.restart(seed, views)
             source_draw.restart(seed + 17)
-            steps_this = -(-len(views) // cfg.target_per_step)
             desc = f"epoch {epoch + 1} round {r + 1}/{len(plan)}"
             bar = tqdm(range(steps_this), desc=desc, leave=False, disable=not cfg.progress)
             loss_sum, steps = 0.0, 0
@@ -424,7 +430,8 @@ def build_parser() -> argparse.ArgumentParser:
             "warmup": "fraction with a linear LR warm-up",
             "decay_start": "fraction after which the LR decays",
             "frames_per_round": "frames the teacher labels at a time",
-            "target_per_step": "target views per step",
+            "target_per_step": "target views per step (0: a control on the source views alone, as many steps as "
+            "at 4)",
             "source_per_step": "labelled views per step",
             "seed": "seed of the order and the augmentation",
         },

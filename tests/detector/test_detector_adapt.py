@@ -223,6 +223,19 @@ def test_weights_are_bit_identical_without_the_targets_boxes_and_poses(tiny, tmp
     assert any(not torch.equal(init[k], adapted[k]) for k in init if init[k].is_floating_point())
 
 
+def test_a_control_on_the_source_alone_takes_the_same_steps_and_labels_nothing(tiny, tmp_path):
+    """``--target-per-step 0``: the steps a run at 4 target views per step takes (18 views in rounds of 4 frames:
+    12 and 6 views, 3 + 2 steps), on source views only; the teacher labels nothing."""
+    assert adapt_main(_args(tiny, tmp_path / "c", "bare", "--epochs", "1", "--target-per-step", "0")) == 0
+    log = [json.loads(line) for line in (tmp_path / "c" / "log.jsonl").read_text().splitlines()]
+    assert all(r["pseudo"] == {} for r in log)
+    views_per_round = [12, 6]  # 6 frames of 3 views in rounds of 4 frames
+    assert sorted(r["steps"] for r in log)[-1] == sum(-(-v // 4) for v in views_per_round)
+    init = PersonDetector.from_checkpoint(tiny["init"]).model.state_dict()
+    control = PersonDetector.from_checkpoint(tmp_path / "c" / "last").model.state_dict()
+    assert any(not torch.equal(init[k], control[k]) for k in init if init[k].is_floating_point())
+
+
 def test_resume_continues_where_it_stopped(tiny, tmp_path):
     constant = ["--decay-start", "1.0", "--warmup", "0"]  # the LR does not depend on the planned length
     assert adapt_main(_args(tiny, tmp_path / "whole", "bare", "--epochs", "2", *constant)) == 0
