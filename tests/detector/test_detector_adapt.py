@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -234,6 +235,27 @@ def test_a_control_on_the_source_alone_takes_the_same_steps_and_labels_nothing(t
     init = PersonDetector.from_checkpoint(tiny["init"]).model.state_dict()
     control = PersonDetector.from_checkpoint(tmp_path / "c" / "last").model.state_dict()
     assert any(not torch.equal(init[k], control[k]) for k in init if init[k].is_floating_point())
+
+
+def test_the_over_confidence_benchmark_counts_what_the_teacher_would_keep(tiny, tmp_path):
+    """benchmarks/adapt_confidence.py: a detector's pseudo-label counts on unlabelled frames, as a table and JSON."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "counts.json"
+    run = subprocess.run(
+        [sys.executable, str(Path(__file__).resolve().parents[2] / "benchmarks" / "adapt_confidence.py"),
+         "--data", str(tiny["target"]), "--annotations", str(tiny["bare"]), "--max-frames", "2",
+         "--checkpoints", str(tiny["init"]), str(tiny["init"]), "--labels", "a", "b", "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    rows = json.loads(out.read_text())["rows"]
+    assert [r["detector"] for r in rows] == ["a", "b"] and rows[0]["frames"] == 2 and rows[0]["views"] == 6
+    assert {k: v for k, v in rows[0].items() if k != "detector"} == {
+        k: v for k, v in rows[1].items() if k != "detector"
+    }
+    assert "| a |" in run.stdout and "machine:" in run.stdout
 
 
 def test_resume_continues_where_it_stopped(tiny, tmp_path):
