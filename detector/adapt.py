@@ -86,9 +86,10 @@ class DetectorAdaptConfig:
     # Frames labelled by the teacher at a time, then trained on: the teacher's labels stay fresh, and a time budget
     # or an interruption loses at most one round (a checkpoint follows each)
     frames_per_round: int = 64
-    # Target views (pseudo-labelled) per step. 0: a control run on the source views alone, taking the steps (and
-    # the learning-rate schedule) that a run at 4 target views per step takes, without labelling the target: what
-    # the fine-tune itself does to the detector, against which an adaptation's gain is judged
+    # Target views (pseudo-labelled) per step. 0: a control run on the source views alone, without labelling the
+    # target: with epochs, the steps (and learning-rate schedule) of a run at 4 target views per step; with
+    # minutes, as many as the time allows (about twice as many). What the fine-tune itself does to the detector,
+    # against which an adaptation's gain is judged
     target_per_step: int = 4
     source_per_step: int = 4  # labelled rendered views per step
     # Teacher momentum per step: 0.999 averages the student over ~1,000 steps. A teacher that follows the student
