@@ -163,6 +163,12 @@ def label_target(
     return counts, unsettled
 
 
+def steps_for(views: int, cfg: DetectorAdaptConfig) -> int:
+    """The steps ``views`` target views take: one per ``target_per_step`` of them (the control run, at 0, takes
+    the steps of the default 4 per step)."""
+    return -(-views // (cfg.target_per_step or DetectorAdaptConfig.target_per_step))
+
+
 def rounds(num_frames: int, size: int, seed: int) -> list[list[int]]:
     """An epoch's rounds: runs of ``size`` consecutive frames (neighbours confirm each other), in a seeded order."""
     runs = [list(range(i, min(i + size, num_frames))) for i in range(0, num_frames, size)]
@@ -242,9 +248,7 @@ def adapt(cfg: DetectorAdaptConfig) -> dict:
     groups = param_groups(student, cfg.lr, cfg.backbone_lr, cfg.weight_decay)
     base_lrs = [g["lr"] for g in groups]
     optimiser = torch.optim.AdamW(groups, lr=cfg.lr, weight_decay=cfg.weight_decay)
-    steps_per_epoch = -(
-        -len(target_set) // (cfg.target_per_step or 4)
-    )  # the rounds' steps: one per target_per_step views
+    steps_per_epoch = steps_for(len(target_set), cfg)  # the rounds' steps: one per target_per_step views
     schedule = Schedule(cfg.lr, cfg.epochs * steps_per_epoch, cfg.decay_start, cfg.warmup, cfg.minutes)
     teacher_model = copy.deepcopy(student).eval().requires_grad_(False)
     start_epoch = start_round = 0
@@ -300,12 +304,11 @@ def adapt(cfg: DetectorAdaptConfig) -> dict:
                 break
             t0 = time.perf_counter()
             views = [j for i in frames for j in view_index[i]]
-            steps_this = -(-len(views) // (cfg.target_per_step or 4))
             counts: dict[str, int] = {}
             if cfg.target_per_step:
                 counts, unsettled = label_target(teacher, target, frames, cfg, cfg.progress)
                 views = [j for j, doubt in zip(views, unsettled, strict=True) if not doubt]
-                steps_this = -(-len(views) // cfg.target_per_step)
+            steps_this = steps_for(len(views), cfg)
             schedule.elapsed += time.perf_counter() - t0
             seed = cfg.seed * 100003 + epoch * 1009 + r * 7919
             target_draw.restart(seed, views)
@@ -452,9 +455,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def fresh() -> DetectorAdaptConfig:
         cfg = DetectorAdaptConfig(**config_options(args, DetectorAdaptConfig))
-        cfg.pseudo = dataclasses.replace(
-            cfg.pseudo, high=args.high, low=args.low, unsettled_floor=args.unsettled_floor
-        )
+        cfg.pseudo = dataclasses.replace(cfg.pseudo, **config_options(args, PseudoBoxConfig))
         if not 0.0 <= cfg.pseudo.low <= cfg.pseudo.high <= 1.0:
             raise ValueError(f"need 0 <= --low <= --high <= 1, got --low {args.low} --high {args.high}")
         return cfg

@@ -215,16 +215,22 @@ def pseudo_boxes(
     for v in range(V):
         b = np.asarray(boxes[v], np.float64).reshape(-1, 4)
         s = np.asarray(scores[v], np.float64).reshape(-1)
-        floor = cfg.unsettled_floor
-        d = b[(s >= floor) & (s < cfg.high)] if floor is not None else np.zeros((0, 4))
-        if backgrounds is not None and len(d):  # on the static scene: settled, as background
-            d = d[foreground_share(d, depths[v], backgrounds[v], cfg.foreground_mm) >= cfg.min_foreground]
-        doubtful.append(d)
-        keep = s >= cfg.low
-        b, s = b[keep], s[keep]
+        # in front of the static scene (one integral image per view serves every box); all, without a background
+        front = np.ones(len(b), bool)
         if backgrounds is not None and len(b):
-            moving = foreground_share(b, depths[v], backgrounds[v], cfg.foreground_mm) >= cfg.min_foreground
-            moving |= s >= cfg.static_certain  # the detector's own certainty outweighs the background
+            front = foreground_share(b, depths[v], backgrounds[v], cfg.foreground_mm) >= cfg.min_foreground
+        doubt = (
+            np.zeros(len(b), bool)
+            if cfg.unsettled_floor is None
+            else (s >= cfg.unsettled_floor) & (s < cfg.high)
+        )
+        doubtful.append(b[doubt & front])  # a doubtful box on the static scene is settled, as background
+        keep = s >= cfg.low
+        b, s, moving = b[keep], s[keep], front[keep]
+        if backgrounds is not None and len(b):
+            moving = moving | (
+                s >= cfg.static_certain
+            )  # the detector's own certainty outweighs the background
             counts["static"] += int((~moving & (s >= cfg.high)).sum())
             b, s = b[moving], s[moving]
         cand.append(b)
@@ -275,14 +281,10 @@ def pseudo_boxes(
             kept[v].append(box)
             counts["filled"] += 1
     out = [np.asarray(k, np.float32).reshape(-1, 4) for k in kept]
-    unsettled = []
-    for v in range(V):
-        mine = out[v].astype(np.float64)
-        if not len(doubtful[v]):
-            unsettled.append(False)
-        elif not len(mine):
-            unsettled.append(True)
-        else:
-            unsettled.append(bool((iou_xyxy(doubtful[v], mine).max(axis=1) < cfg.snap_iou).any()))
+    unsettled = [  # a doubtful box that no kept box overlaps (with none kept, any doubtful box)
+        len(d) > 0
+        and (not len(k) or bool((iou_xyxy(d, k.astype(np.float64)).max(axis=1) < cfg.snap_iou).any()))
+        for d, k in zip(doubtful, out, strict=True)
+    ]
     counts["unsettled"] = sum(unsettled)
     return PseudoBoxes(out, counts, unsettled)

@@ -139,13 +139,8 @@ def resolve_config(args: argparse.Namespace) -> TrainConfig:
     if args.loss is not None:
         model["aggregation"] = args.loss
     augment = {**preset.pop("augment"), **config_options(args, AugmentConfig)}
-    top = {f.name for f in dataclasses.fields(TrainConfig)} - {
-        "model",
-        "augment",
-        "data_description",
-        "preset",
-    }
-    given = {k: getattr(args, k) for k in top if getattr(args, k, None) is not None}
+    nested = ("model", "augment", "data_description", "preset")
+    given = {k: v for k, v in config_options(args, TrainConfig).items() if k not in nested}
     cfg = {**preset, **given, "preset": args.preset}
     return TrainConfig(
         **cfg, model=ModelConfig(inputs=InputConfig(**inputs), **model), augment=AugmentConfig(**augment)
