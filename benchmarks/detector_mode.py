@@ -271,7 +271,7 @@ def main(argv: list[str] | None = None) -> dict:
         for name, variant in pipes.items():
             variant.detector = frame
             result = variant.run(views)
-            ids = ground_truth_ids(sample, [q.boxes for q in result.persons])
+            ids = ground_truth_ids(sample, result.boxes)
             preds[name] += [prediction_record(sample.id, pid, q.joints, q.spread_mm, q.confidence)
                             for q, pid in zip(result.persons, ids, strict=True) if pid is not None]  # fmt: skip
             nobody[name] += sum(pid is None for pid in ids)

@@ -39,7 +39,7 @@ from pipeline.skeleton_matching import (
     match_heatmaps,
     split_unsure,
 )
-from posenet.boxes import boxes_of_person, coco_to_xyxy, dense_boxes, iou_xyxy, match_persons, person_ids
+from posenet.boxes import PersonBoxes, boxes_of_person, coco_to_xyxy, iou_xyxy, match_persons, person_ids
 from posenet.cli import add_annotations, add_data, add_days, add_threads, annotations_path, set_threads
 
 # As pipeline.two_stage.PipelineConfig.max_match_combinations: frames beyond it are refused, not enumerated.
@@ -113,7 +113,7 @@ def _paper_score(gt_boxes, gt_ids, pred_boxes, groups, persons) -> float:
     V = len(gt_boxes)
     gt = [boxes_of_person(gt_boxes, gt_ids, p) for p in persons]
     found = [[None if k < 0 else pred_boxes[v][k] for v, k in enumerate(g.indices)] for g in groups]
-    _, _, scores = match_persons(dense_boxes(gt, V), dense_boxes(found, V))
+    _, _, scores = match_persons(PersonBoxes.from_lists(gt, V), PersonBoxes.from_lists(found, V))
     return float(scores.sum())
 
 

@@ -37,7 +37,7 @@ from pipeline.skeleton_matching import (
     view_members,
 )
 from pipeline.track import reaching
-from posenet.boxes import ground_truth_ids, hull, identified
+from posenet.boxes import PersonBoxes, ground_truth_ids, hull, identified
 from posenet.data.sample import Sample
 from posenet.evaluation.evaluate import prediction_record
 from posenet.net.lifting import JointEstimate
@@ -83,12 +83,12 @@ class PipelineConfig:
 class PersonResult(PersonPose):
     """One person of a scene: its pose (:class:`posenet.scene.PersonPose`: ``joints`` (J, 3) mm in the reference
     frame, ``spread_mm`` (J,), ``confidence`` (J,) calibrated from the spread and the number of supporting views)
-    and where the pipeline found it.
+    and where the pipeline found it: its row ``row`` of the scene's persons' boxes (``SceneResult.boxes``, a
+    ``posenet.boxes.PersonBoxes``).
 
     Attributes:
         id: the client's person id (reference-box mode with ids) or an index within the scene.
-        boxes: V entries: the person's (4,) xyxy box in that view, or None where it has none.
-        scores: V entries: the detector score of that box, or None (reference box or no box).
+        person_boxes: the scene's persons' boxes, in the pixels the pipeline was given; this person is ``row``.
         box_indices: V entries: the indices, among the boxes of that view given to (or found by) the pipeline, of
             the person's boxes there (one, several when the skeleton matcher merged a split person, or none).
         unsure: every box of this person scored below the detector's threshold: not a person of the frame on
@@ -97,23 +97,42 @@ class PersonResult(PersonPose):
     """
 
     id: int
-    boxes: list[np.ndarray | None]
-    scores: list[float | None]
+    person_boxes: PersonBoxes = field(repr=False)
+    row: int
     box_indices: list[tuple[int, ...]] = field(default_factory=list)
     unsure: bool = False
 
     @property
+    def boxes(self) -> np.ndarray:
+        """(V, 4) xyxy: the person's box in each view (the hull of its boxes there; zeros where ``has_box`` is
+        False)."""
+        return self.person_boxes.boxes[self.row]
+
+    @property
+    def has_box(self) -> np.ndarray:
+        """(V,) bool: the views in which the person has a box."""
+        return self.person_boxes.has_box[self.row]
+
+    @property
+    def scores(self) -> np.ndarray:
+        """(V,): the best detector score of the person's boxes in each view; NaN for reference boxes and where
+        it has none."""
+        return self.person_boxes.scores[self.row]
+
+    @property
     def support(self) -> list[int]:
         """The views in which this person has a box."""
-        return [v for v, box in enumerate(self.boxes) if box is not None]
+        return self.person_boxes.support(self.row)
 
 
 @dataclass
 class SceneResult:
-    """The persons of one frame and the milliseconds spent in each stage (detect, match, pose)."""
+    """The persons of one frame, their boxes (row p of ``boxes`` is ``persons[p]``'s), and the milliseconds spent
+    in each stage (detect, match, pose)."""
 
     mode: str  # "reference_boxes" or "detector"
     persons: list[PersonResult]
+    boxes: PersonBoxes
     timings: dict[str, float] = field(default_factory=dict)
     # ms of timings["match"] spent on the persons of unsure boxes for a tracker (``run(unsure=...)``): asking it
     # whether it can use them, and grouping them when it can; what a stream adds beside the tracker's update
@@ -420,7 +439,8 @@ class ScenePipeline:
         if heat is None:  # ids and the centre matcher give per view one box index, or -1
             groups = [[() if k < 0 else (k,) for k in group] for group in groups]
         first_unsure = len(groups) - len(unsure_groups)
-        found = [self._person_boxes(held, boxes, scores) for held in groups]  # per person (boxes, scores)
+        found = self._person_boxes(groups, boxes, scores, ids)
+        kept = found  # no person: no row
         persons = []
         t0 = time.perf_counter()
         if groups:
@@ -428,35 +448,40 @@ class ScenePipeline:
             if heat is not None:
                 prediction = fused(heat, matched, unsure_groups, boxes, sure)
             else:
-                prediction = self.pose.predict(Scene.from_person_boxes(views, [b for b, _ in found], ids))
+                prediction = self.pose.predict(Scene.from_person_boxes(views, found))
             joints = np.asarray(prediction.joints, dtype=np.float64)  # (P, J, 3)
             spread = torch.as_tensor(prediction.spread_mm, dtype=torch.float64).cpu()  # (P, J) mm
-            support = torch.tensor([sum(b is not None for b in person_boxes) for person_boxes, _ in found])
+            support = torch.from_numpy(found.has_box.sum(1))
             confidence = self.pose.calibration(
                 spread, support, torch.as_tensor(joints)
             ).numpy()  # (P, J) in [0, 1]
             # A person whose boxes hold no valid depth has no lifted points: its joints mean nothing.
-            has_points = np.asarray(prediction.has_points, dtype=bool)  # (P,)
+            rows = np.flatnonzero(np.asarray(prediction.has_points, dtype=bool))
+            kept = found.select(rows)
             persons = [
                 PersonResult(
-                    joints[p], spread[p].numpy(), confidence[p], id=pid, boxes=person_boxes,
-                    scores=person_scores, box_indices=held, unsure=p >= first_unsure,
+                    joints[p], spread[p].numpy(), confidence[p], id=ids[p], person_boxes=kept, row=r,
+                    box_indices=groups[p], unsure=p >= first_unsure,
                 )
-                for p, (pid, held, (person_boxes, person_scores)) in enumerate(zip(ids, groups, found, strict=True))
-                if has_points[p]
+                for r, p in enumerate(rows.tolist())
             ]  # fmt: skip
         timings["pose"] += _ms(t0)
         mode = "detector" if scores[0] is not None else "reference_boxes"
-        return SceneResult(mode, persons, timings, unsure_ms)
+        return SceneResult(mode, persons, kept, timings, unsure_ms)
 
     @staticmethod
-    def _person_boxes(members: list[tuple[int, ...]], boxes, scores) -> tuple[list, list]:
-        """Per view the person's box (the hull of its boxes ``members`` there) and its best detector score."""
-        return (
-            [hull(boxes[v][list(ks)]) if ks else None for v, ks in enumerate(members)],
-            [max(float(scores[v][k]) for k in ks) if ks and scores[v] is not None else None
-             for v, ks in enumerate(members)],
-        )  # fmt: skip
+    def _person_boxes(groups: list[list[tuple[int, ...]]], boxes, scores, ids) -> PersonBoxes:
+        """The persons ``groups`` (per view the indices of their boxes there): per view the person's box (the hull
+        of those boxes) and their best detector score."""
+        P, V = len(groups), len(boxes)
+        out = PersonBoxes(np.zeros((P, V, 4)), np.zeros((P, V), bool), np.asarray(ids, np.int64).reshape(P))
+        for p, members in enumerate(groups):
+            for v, ks in enumerate(members):
+                if ks:
+                    out.boxes[p, v], out.has_box[p, v] = hull(boxes[v][list(ks)]), True
+                    if scores[v] is not None:
+                        out.scores[p, v] = max(float(scores[v][k]) for k in ks)
+        return out
 
     def _fit_boxes(
         self, boxes, scores, limit: int, why: str, candidate=None
@@ -549,7 +574,7 @@ class ScenePipeline:
             ids = [p.id for p in result.persons]
         else:
             result = self.run(views)
-            ids = ground_truth_ids(sample, [p.boxes for p in result.persons])
+            ids = ground_truth_ids(sample, result.boxes)
         predictions = [
             prediction_record(sample.id, pid, p.joints, p.spread_mm, p.confidence)
             for p, pid in zip(result.persons, ids, strict=True)

@@ -17,8 +17,11 @@ person rules are numpy (evaluation and matching, never in a gradient).
 
 **Persons.** A box whose person id is ``>= 0`` belongs to that person; ``NO_IDENTITY`` (-1) marks a box without
 an identity (MVOR annotates some boxes without a 3D pose or a name), which is never a person to estimate.
-A person across V views is a list of V entries, each a box or None, or densely ``(P, V, 4)`` with NaN where
-the person has no box.
+P persons across V views are one :class:`PersonBoxes`: ``(P, V, 4)`` boxes, a ``(P, V)`` mask of where a person
+has a box, ``(P,)`` ids and, for detected boxes, ``(P, V)`` scores. It is the one dense form: the readers'
+persons (``posenet.scene.Scene``), the pipeline's (``pipeline.two_stage.SceneResult.boxes``), the response's and
+the evaluation's identity rule read it. Where a literal is handier (tests, the client's JSON), P lists of V
+entries, each a box or None, convert with :meth:`PersonBoxes.from_lists`.
 
 **The paper's identity rule** (Sec. "Bounding boxes from DETR"): a detected person is the annotated person whose
 boxes it overlaps most, by IoU averaged over the V views (a view where either has no box scores 0), matched one
@@ -28,6 +31,7 @@ to one by the assignment that maximises the total (Hungarian).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -201,41 +205,150 @@ def boxes_of_person(
     return out
 
 
-def dense_boxes(persons: Sequence[Sequence[Sequence[float] | None]], num_views: int) -> np.ndarray:
-    """P persons of ``num_views`` entries (a box or None) as ``(P, V, 4)`` float64, NaN where there is no box."""
-    out = np.full((len(persons), num_views, 4), np.nan)
-    for p, views in enumerate(persons):
-        if len(views) != num_views:
-            raise ValueError(f"person {p} has {len(views)} box entries, expected {num_views} (one per view)")
-        for v, box in enumerate(views):
-            if box is not None:
-                out[p, v] = np.asarray(box, np.float64).reshape(4)
-    return out
+@dataclass
+class PersonBoxes:
+    """P persons' boxes in V views: the one person-boxes type (module docstring).
+
+    Attributes:
+        boxes: (P, V, 4) float64 xyxy pixels of each person in each view; zeros where ``has_box`` is False.
+        has_box: (P, V) bool, whether the person has a box in that view.
+        ids: (P,) int64 person ids (the dataset's, the client's, or 0..P-1).
+        scores: (P, V) float64 detector score of each box; NaN for a reference box and where there is none.
+    """
+
+    boxes: np.ndarray
+    has_box: np.ndarray
+    ids: np.ndarray
+    scores: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self.boxes = np.asarray(self.boxes, np.float64)
+        self.has_box = np.asarray(self.has_box, bool)
+        P = self.boxes.shape[0] if self.boxes.ndim == 3 else -1
+        V = self.boxes.shape[1] if self.boxes.ndim == 3 else -1
+        self.ids = np.arange(P, dtype=np.int64) if self.ids is None else np.asarray(self.ids, np.int64)
+        if self.scores is None:
+            self.scores = np.full((max(P, 0), max(V, 0)), np.nan)
+        self.scores = np.asarray(self.scores, np.float64)
+        if (
+            self.boxes.shape != (P, V, 4)
+            or self.has_box.shape != (P, V)
+            or self.ids.shape != (P,)
+            or self.scores.shape != (P, V)
+        ):
+            raise ValueError(
+                "person boxes need boxes (P, V, 4), has_box (P, V), ids (P,) and scores (P, V), got "
+                f"{self.boxes.shape}, {self.has_box.shape}, {self.ids.shape} and {self.scores.shape}"
+            )
+
+    @classmethod
+    def from_lists(
+        cls,
+        person_boxes: Sequence[Sequence],
+        num_views: int,
+        ids: Sequence[int] | None = None,
+        scores: Sequence[Sequence[float | None]] | None = None,
+        check: bool = False,
+    ) -> PersonBoxes:
+        """P persons given as P lists of ``num_views`` entries, each an xyxy box or None (and, optionally, as
+        many scores or None). ``ids`` default to 0..P-1.
+
+        ``check`` refuses, naming the person and view, entries that are not one per view or a box that is not
+        finite with x1 > x0 and y1 > y0 (boxes from a client); a wrong count is refused always.
+        """
+        P = len(person_boxes)
+        boxes = np.zeros((P, num_views, 4))
+        has = np.zeros((P, num_views), bool)
+        for p, per_view in enumerate(person_boxes):
+            if len(per_view) != num_views:
+                raise ValueError(
+                    f"person {p} has {len(per_view)} box entries, expected one per view ({num_views})"
+                )
+            for v, box in enumerate(per_view):
+                if box is None:
+                    continue
+                b = np.asarray(box, np.float64).reshape(-1)
+                if b.shape != (4,):
+                    raise ValueError(f"person {p}, view {v}: a box is 4 numbers x0, y0, x1, y1, got {box}")
+                boxes[p, v], has[p, v] = b, True
+        dense_scores = None
+        if scores is not None:
+            dense_scores = np.array(
+                [[np.nan if s is None else float(s) for s in per_view] for per_view in scores], np.float64
+            ).reshape(P, num_views)
+        out = cls(boxes, has, None if ids is None else list(ids), dense_scores)
+        if check:
+            out.validate()
+        return out
+
+    def validate(self) -> None:
+        """Raise ValueError naming the first person and view whose box is not finite with x1 > x0, y1 > y0."""
+        b = self.boxes
+        bad = self.has_box & ~(np.isfinite(b).all(-1) & (b[..., 2] > b[..., 0]) & (b[..., 3] > b[..., 1]))
+        if bad.any():
+            p, v = np.argwhere(bad)[0]
+            raise ValueError(
+                f"person {p}, view {v}: box must be finite xyxy with x1 > x0, y1 > y0, got {b[p, v].tolist()}"
+            )
+
+    @classmethod
+    def of(cls, persons: PersonBoxes | Sequence[Sequence], num_views: int | None = None) -> PersonBoxes:
+        """``persons`` as they are, or converted from lists (:meth:`from_lists`; ``num_views`` then defaults to
+        the first person's entries)."""
+        if isinstance(persons, PersonBoxes):
+            return persons
+        if num_views is None:
+            num_views = len(persons[0]) if len(persons) else 0
+        return cls.from_lists(persons, num_views)
+
+    def __len__(self) -> int:
+        return self.boxes.shape[0]
+
+    @property
+    def num_views(self) -> int:
+        return self.boxes.shape[1]
+
+    def box(self, p: int, v: int) -> np.ndarray | None:
+        """Person ``p``'s (4,) box in view ``v``, or None where it has none."""
+        return self.boxes[p, v] if self.has_box[p, v] else None
+
+    def score(self, p: int, v: int) -> float | None:
+        """The detector score of person ``p``'s box in view ``v``, or None (no box, or a reference box)."""
+        s = self.scores[p, v]
+        return None if np.isnan(s) else float(s)
+
+    def support(self, p: int) -> list[int]:
+        """The views in which person ``p`` has a box."""
+        return np.flatnonzero(self.has_box[p]).tolist()
+
+    def select(self, rows) -> PersonBoxes:
+        """The persons ``rows`` (indices or a (P,) bool mask), in that order."""
+        return PersonBoxes(self.boxes[rows], self.has_box[rows], self.ids[rows], self.scores[rows])
+
+    def rescaled(self, factors: Sequence[float]) -> PersonBoxes:
+        """The boxes in images resized per view by ``factors`` (V,) (``posenet.cameras.rescale_pixels``); a
+        view of factor 1 keeps its boxes bit for bit."""
+        k = np.asarray(factors, np.float64).reshape(1, -1, 1)
+        boxes = np.where(self.has_box[..., None] & (k != 1), rescale_pixels(self.boxes, k), self.boxes)
+        return PersonBoxes(boxes, self.has_box, self.ids, self.scores)
 
 
 # ----------------------------------------------------------------------------------------------- identity
-def mean_view_iou(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
-    """Mean IoU over views between predicted and ground-truth persons.
-
-    Args:
-        pred: (P, V, 4) boxes of each predicted person per view, NaN where it has no box.
-        gt: (G, V, 4) the same for the ground-truth persons.
-
-    Returns:
-        (P, G) the IoU averaged over the V views, a view where either has no box counting 0.
-    """
-    if pred.ndim != 3 or gt.ndim != 3 or pred.shape[1:] != gt.shape[1:] or pred.shape[2] != 4:
-        raise ValueError(f"pred and gt must be (P, V, 4) and (G, V, 4), got {pred.shape} and {gt.shape}")
-    ious = box_iou(np.nan_to_num(pred)[:, None], np.nan_to_num(gt)[None])  # (P, G, V)
-    present = ~np.isnan(pred[:, None, :, 0]) & ~np.isnan(gt[None, :, :, 0])  # (P, G, V)
+def mean_view_iou(pred: PersonBoxes, gt: PersonBoxes) -> np.ndarray:
+    """Mean IoU over views between predicted and ground-truth persons: ``(P, G)``, the IoU averaged over the V
+    views, a view where either has no box counting 0."""
+    if pred.num_views != gt.num_views:
+        raise ValueError(
+            f"pred and gt must be seen by the same views, got {pred.num_views} and {gt.num_views} views"
+        )
+    ious = box_iou(pred.boxes[:, None], gt.boxes[None])  # (P, G, V)
+    present = pred.has_box[:, None, :] & gt.has_box[None]  # (P, G, V)
     return np.where(present, ious, 0.0).mean(axis=-1)
 
 
-def match_persons(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The one-to-one matching of predicted to ground-truth persons that maximises the total mean-view IoU.
-
-    Args:
-        pred: (P, V, 4), gt: (G, V, 4) boxes, NaN where a person has no box (see :func:`mean_view_iou`).
+def match_persons(pred: PersonBoxes, gt: PersonBoxes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The one-to-one matching of predicted to ground-truth persons that maximises the total mean-view IoU
+    (:func:`mean_view_iou`).
 
     Returns:
         rows (M,) indices into ``pred``, cols (M,) into ``gt``, and their mean-view IoUs (M,);
@@ -247,29 +360,27 @@ def match_persons(pred: np.ndarray, gt: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 
 def assign(
-    pred_boxes: Sequence[Sequence[Sequence[float] | None]],
-    gt_boxes: Sequence[Sequence[Sequence[float] | None]],
-    min_iou: float = 0.1,
+    pred: PersonBoxes | Sequence[Sequence], gt: PersonBoxes | Sequence[Sequence], min_iou: float = 0.1
 ) -> list[int | None]:
     """For each predicted person, the index of its ground-truth person (or None).
 
     Args:
-        pred_boxes: P persons, each V entries: an xyxy box or None.
-        gt_boxes: G persons, each V entries: an xyxy box or None.
+        pred: P persons (:class:`PersonBoxes`, or lists of V entries: an xyxy box or None).
+        gt: G persons, the same.
         min_iou: the least mean IoU for a pair to count as the same person.
     """
-    out: list[int | None] = [None] * len(pred_boxes)
-    if not pred_boxes or not gt_boxes:
+    out: list[int | None] = [None] * len(pred)
+    if not len(pred) or not len(gt):
         return out
-    V = len(gt_boxes[0])
-    rows, cols, scores = match_persons(dense_boxes(pred_boxes, V), dense_boxes(gt_boxes, V))
+    gt = PersonBoxes.of(gt)
+    rows, cols, scores = match_persons(PersonBoxes.of(pred, gt.num_views), gt)
     for r, c, s in zip(rows, cols, scores, strict=True):
         if s > min_iou:
             out[r] = int(c)
     return out
 
 
-def ground_truth_ids(sample, pred_boxes: Sequence[Sequence[Sequence[float] | None]]) -> list[int | None]:
+def ground_truth_ids(sample, pred: PersonBoxes | Sequence[Sequence]) -> list[int | None]:
     """The ground-truth person id of each predicted person of ``sample`` (None where none overlaps enough).
 
     The paper's protocol: predicted persons are matched to the annotated ones by their IoU averaged over the
@@ -281,12 +392,12 @@ def ground_truth_ids(sample, pred_boxes: Sequence[Sequence[Sequence[float] | Non
 
     Args:
         sample: the annotated frame (a ``posenet.data.sample.Sample``); its persons are :func:`person_ids`.
-        pred_boxes: P persons, each V entries: an xyxy box or None.
+        pred: the P predicted persons (:class:`PersonBoxes`, or lists of V entries: an xyxy box or None).
     """
     boxes = [np.asarray(v.boxes, np.float64).reshape(-1, 4) for v in sample.views]
     ids = [np.asarray(v.box_person_ids).reshape(-1) for v in sample.views]
     gt_ids = person_ids(ids)
     V = len(boxes)
     box_only = [[b if u == v else None for u in range(V)] for v in range(V) for b in boxes[v][ids[v] < 0]]
-    matches = assign(pred_boxes, [boxes_of_person(boxes, ids, pid) for pid in gt_ids] + box_only)
+    matches = assign(PersonBoxes.of(pred, V), [boxes_of_person(boxes, ids, pid) for pid in gt_ids] + box_only)
     return [None if g is None or g >= len(gt_ids) else gt_ids[g] for g in matches]

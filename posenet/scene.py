@@ -2,8 +2,8 @@
 (:class:`Scene`) go in; one :class:`PersonPose` per person comes out.
 
 Every path to the pose network builds a :class:`Scene`: the dataset readers' samples (:meth:`Scene.from_sample`,
-training, validation, offline prediction), the service's requests and the cross-view matchers (per person, V
-boxes or None: :meth:`Scene.from_person_boxes`). ``posenet.net.infer.PoseEstimator.predict`` takes it, and
+training, validation, offline prediction), the service's requests and the cross-view matchers (their persons'
+``posenet.boxes.PersonBoxes``: :meth:`Scene.from_person_boxes`). ``posenet.net.infer.PoseEstimator.predict`` takes it, and
 ``posenet.net.inputs.build_scene`` turns its views and boxes into the network's inputs.
 
 Pixels and boxes follow ``posenet.boxes`` (xyxy, origin at the centre of the top-left pixel); cameras,
@@ -11,7 +11,8 @@ millimetres and frames follow ``posenet.cameras``.
 
 Usage::
 
-    scene = Scene.from_person_boxes(views, [[box_0, None, box_2], ...])   # views: V SceneViews
+    scene = Scene.from_person_boxes(views, person_boxes)   # a posenet.boxes.PersonBoxes; views: V SceneViews
+    scene = Scene.from_person_boxes(views, [[box_0, None, box_2], ...])   # or P lists of V boxes or None
     scene = Scene.from_sample(sample, "boxed")                            # a posenet.data.sample.Sample
     scene.boxes      # (P, V, 4) float32 xyxy (zeros where has_box is False)
     scene.has_box    # (P, V) bool
@@ -27,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from posenet.boxes import person_ids
+from posenet.boxes import PersonBoxes, person_ids
 from posenet.cameras import Camera
 from posenet.skeleton import NUM_JOINTS
 
@@ -92,27 +93,6 @@ def scene_views(views: Sequence) -> list[SceneView]:
     return [v if isinstance(v, SceneView) else SceneView(*v) for v in views]
 
 
-def _dense(person_boxes: Sequence[Sequence], V: int, check: bool) -> tuple[np.ndarray, np.ndarray]:
-    """P lists of V entries (an xyxy box or None) as ``(P, V, 4)`` float32 boxes (zeros where none) and a
-    ``(P, V)`` bool mask; ``check`` refuses entries that are not one box per view, finite, with positive size."""
-    P = len(person_boxes)
-    boxes = np.zeros((P, V, 4), np.float32)
-    has = np.zeros((P, V), bool)
-    for p, per_view in enumerate(person_boxes):
-        if check and len(per_view) != V:
-            raise ValueError(f"person {p} has {len(per_view)} box entries, expected one per view ({V})")
-        for v, box in enumerate(per_view):
-            if box is None:
-                continue
-            b = np.asarray(box, np.float32).reshape(-1)
-            if check and (b.shape != (4,) or not np.isfinite(b).all() or b[2] <= b[0] or b[3] <= b[1]):
-                raise ValueError(
-                    f"person {p}, view {v}: box must be finite xyxy with x1 > x0, y1 > y0, got {box}"
-                )
-            boxes[p, v], has[p, v] = b, True
-    return boxes, has
-
-
 @dataclass
 class Scene:
     """One synchronised multi-view frame and the P persons to estimate in it.
@@ -121,6 +101,8 @@ class Scene:
         views: V :class:`SceneView`\\ s (a sample's views are; tuples ``(color, depth, camera)`` are converted),
             all of one image size.
         boxes: (P, V, 4) float32 xyxy pixels of each person in each view (ignored where ``has_box`` is False).
+            With ``has_box`` and ``person_ids``, the network's tensor form of a ``posenet.boxes.PersonBoxes``
+            (:meth:`from_person_boxes`, :attr:`person_boxes`).
         has_box: (P, V) bool, whether the person has a box in that view; the network runs only there.
         person_ids: (P,) int64 identities (the dataset's person ids, the client's, or 0..P-1).
         poses: (P, J, 3) float32 mm, reference frame: the ground truth, zeros where there is none.
@@ -176,21 +158,35 @@ class Scene:
     def from_person_boxes(
         cls,
         views: Sequence[SceneView],
-        person_boxes: Sequence[Sequence],
+        persons: PersonBoxes | Sequence[Sequence],
         person_ids: Sequence[int] | None = None,
         id: str | None = None,
     ) -> Scene:
-        """The scene of P persons given as P lists of V entries, each an xyxy box (pixels of that view) or None
-        (the service's reference boxes, the matchers' groups). ``person_ids`` default to 0..P-1.
+        """The scene of the persons ``persons``: a :class:`posenet.boxes.PersonBoxes` (the pipeline's), or P
+        lists of V entries, each an xyxy box (pixels of that view) or None (a client's, a test's), whose ids are
+        ``person_ids`` (default 0..P-1).
 
         Raises ValueError naming the person and view of an entry that is not one box per view, finite, with
         x1 > x0 and y1 > y0.
         """
-        boxes, has = _dense(person_boxes, len(views), check=True)
-        ids = range(len(boxes)) if person_ids is None else person_ids
+        if not isinstance(persons, PersonBoxes):
+            persons = PersonBoxes.from_lists(persons, len(views), person_ids, check=True)
+        elif persons.num_views != len(views):
+            raise ValueError(f"the persons' boxes are in {persons.num_views} views, the scene has {len(views)}")
+        else:
+            persons.validate()
         return cls(
-            list(views), torch.from_numpy(boxes), torch.from_numpy(has), torch.tensor(list(ids)), id=id
+            list(views),
+            torch.from_numpy(persons.boxes.astype(np.float32)),
+            torch.from_numpy(persons.has_box),
+            torch.from_numpy(persons.ids),
+            id=id,
         )
+
+    @property
+    def person_boxes(self) -> PersonBoxes:
+        """The persons' boxes, mask and ids as the one person-boxes type (numpy; no scores)."""
+        return PersonBoxes(self.boxes.numpy(), self.has_box.numpy(), self.person_ids.numpy())
 
     @classmethod
     def from_sample(cls, sample, which: str = "annotated") -> Scene:
@@ -217,13 +213,13 @@ class Scene:
                     poses[p], valid[p] = sample.poses[index[i]], sample.valid[index[i]]
         else:
             raise ValueError(f"which must be 'annotated' or 'boxed', got {which!r}")
-        boxes, has_box = _dense([sample.person_boxes(pid) for pid in ids], len(sample.views), check=False)
-        keep = has_box.any(1)
+        persons = PersonBoxes.from_lists([sample.person_boxes(pid) for pid in ids], len(sample.views), ids)
+        keep = persons.has_box.any(1)
         return cls(
             list(sample.views),
-            torch.from_numpy(boxes[keep]),
-            torch.from_numpy(has_box[keep]),
-            torch.tensor(ids, dtype=torch.int64)[torch.from_numpy(keep)],
+            torch.from_numpy(persons.boxes[keep].astype(np.float32)),
+            torch.from_numpy(persons.has_box[keep]),
+            torch.from_numpy(persons.ids[keep]),
             torch.from_numpy(np.asarray(poses, np.float32)[keep]),
             torch.from_numpy(np.asarray(valid, bool)[keep]),
             sample.id,

@@ -17,8 +17,7 @@ import time
 import numpy as np
 
 from pipeline.two_stage import PersonResult, SceneResult
-from posenet.boxes import hull
-from posenet.cameras import rescale_pixels
+from posenet.boxes import PersonBoxes, hull
 from posenet.net.plausibility import ONE_VIEW_CAP, body_scale, implausible
 from posenet.skeleton import JOINTS
 from service.errors import InputError
@@ -26,20 +25,18 @@ from service.schemas import Joint, Person, SceneOut, Support, Timings
 from service.validation import ValidatedScene
 
 
-def _restore_sent_boxes(persons: list[PersonResult], scene: ValidatedScene) -> None:
-    """Replace each person's (clipped) reference boxes with the boxes as sent, in place; detected boxes are
-    brought from the pixels they were decoded at back to the pixels of the images as sent."""
+def _sent_boxes(result: SceneResult, scene: ValidatedScene) -> PersonBoxes:
+    """The persons' boxes in the client's terms: reference boxes as sent, not as validation clipped them (their
+    hull where a person holds several); detected boxes brought from the pixels they were decoded at back to the
+    pixels of the images as sent."""
     if scene.boxes is None:
-        for person in persons:
-            for v, box in enumerate(person.boxes):
-                k = scene.reduced[v] if scene.reduced else 1
-                if box is not None and k != 1:
-                    person.boxes[v] = rescale_pixels(np.asarray(box, np.float64), k)
-        return
-    for person in persons:  # reference boxes: the person's boxes as sent (their hull where it holds several)
+        return result.boxes.rescaled(scene.reduced) if scene.reduced else result.boxes
+    sent = PersonBoxes(result.boxes.boxes.copy(), result.boxes.has_box, result.boxes.ids, result.boxes.scores)
+    for p, person in enumerate(result.persons):
         for v, held in enumerate(person.box_indices):
             if held:
-                person.boxes[v] = hull(np.asarray(scene.sent_boxes[v], np.float64)[list(held)])
+                sent.boxes[p, v] = hull(np.asarray(scene.sent_boxes[v], np.float64)[list(held)])
+    return sent
 
 
 def _notes(persons: list[PersonResult], scene: ValidatedScene) -> list[str]:
@@ -71,7 +68,8 @@ def _notes(persons: list[PersonResult], scene: ValidatedScene) -> list[str]:
     return notes
 
 
-def _checked(person: PersonResult) -> Person:
+def _checked(person: PersonResult, boxes: PersonBoxes, p: int) -> Person:
+    """Person ``p`` of the response, its boxes ``boxes``' row ``p``."""
     if not (np.isfinite(person.joints).all() and np.isfinite(person.spread_mm).all()):
         raise InputError(
             f"the 3D estimate of person {person.id} is not finite: check the cameras (fx, fy, distortion, "
@@ -86,18 +84,18 @@ def _checked(person: PersonResult) -> Person:
             )
         ],
         views=[
-            Support(view=v, box=[float(x) for x in person.boxes[v]], score=person.scores[v])
-            for v in person.support
+            Support(view=v, box=[float(x) for x in boxes.boxes[p, v]], score=boxes.score(p, v))
+            for v in boxes.support(p)
         ],
     )
 
 
 def scene_out(result: SceneResult, scene: ValidatedScene, decode_ms: float) -> SceneOut:
     """The checked response of ``result``, its ``encode`` and ``total`` timings still 0 (:func:`serialise`)."""
-    _restore_sent_boxes(result.persons, scene)
+    boxes = _sent_boxes(result, scene)
     return SceneOut(
         mode=result.mode,
-        persons=[_checked(p) for p in result.persons],
+        persons=[_checked(person, boxes, p) for p, person in enumerate(result.persons)],
         notes=_notes(result.persons, scene),
         timings=Timings(decode=decode_ms, encode=0.0, total=0.0, **result.timings),
     )

@@ -36,7 +36,7 @@ import numpy as np
 import torch
 
 from posenet.boxes import coco_to_xyxy
-from posenet.cameras import Camera
+from posenet.cameras import Camera, rescale_pixels
 from posenet.data.images import depth_file_name, read_color, read_depth, subsample_color, subsample_depth
 from posenet.data.sample import Sample, View
 from posenet.data.support import boxes_per_person, pose_support
@@ -192,11 +192,6 @@ class _Frame:
     support: np.ndarray  # (N,) int64
 
 
-def _scale_pixels(uv: np.ndarray, factor: int) -> np.ndarray:
-    """The camera rule of ``Camera.scale``: u -> (u + 0.5) / factor - 0.5."""
-    return (uv + 0.5) / factor - 0.5
-
-
 class MvorDataset(torch.utils.data.Dataset):
     """Multi-view frames of an MVOR-format dataset as :class:`Sample`\\ s (see the module docstring).
 
@@ -320,10 +315,10 @@ class MvorDataset(torch.utils.data.Dataset):
                 read_depth(self.root / depth_file_name(image["file_name"]), size), self.subsample
             )
         if self.subsample > 1:
-            boxes = _scale_pixels(boxes, self.subsample)
+            boxes = rescale_pixels(boxes, 1 / self.subsample)
             kps = kps.copy()
             annotated = kps[..., 2] > 0  # unannotated keypoints stay at (0, 0, 0)
-            kps[..., :2] = np.where(annotated[..., None], _scale_pixels(kps[..., :2], self.subsample), 0)
+            kps[..., :2] = np.where(annotated[..., None], rescale_pixels(kps[..., :2], 1 / self.subsample), 0)
         return View(
             camera=camera,
             color=color,

@@ -97,19 +97,19 @@ def test_mean_view_iou_against_brute_force(xyxy):
     P, G, V = 4, 3, 3
     pred, gt = xyxy[: P * V].reshape(P, V, 4).copy(), xyxy[20 : 20 + G * V].reshape(G, V, 4).copy()
     gt[:2] = pred[:2] + rng.normal(0, 5, (2, V, 4))  # two persons overlap their detection
-    pred[0, 1] = np.nan  # missed in one view
-    gt[2, 0] = np.nan  # not in view 0
-    got = B.mean_view_iou(pred, gt)
+    pred_has, gt_has = np.ones((P, V), bool), np.ones((G, V), bool)
+    pred_has[0, 1] = False  # missed in one view
+    gt_has[2, 0] = False  # not in view 0
+    pred_p, gt_p = B.PersonBoxes(pred, pred_has, None), B.PersonBoxes(gt, gt_has, None)
+    got = B.mean_view_iou(pred_p, gt_p)
     for p in range(P):
         for g in range(G):
             ious = [
-                0.0
-                if np.isnan(pred[p, v, 0]) or np.isnan(gt[g, v, 0])
-                else B.iou_xyxy(pred[p, v][None], gt[g, v][None])[0, 0]
+                B.iou_xyxy(pred[p, v][None], gt[g, v][None])[0, 0] if pred_has[p, v] and gt_has[g, v] else 0.0
                 for v in range(V)
             ]
             assert got[p, g] == pytest.approx(np.mean(ious))
-    rows, cols, scores = B.match_persons(pred, gt)
+    rows, cols, scores = B.match_persons(pred_p, gt_p)
     assert len(rows) == G and set(rows[cols < 2]) == {0, 1} and list(cols[rows < 2]) == [0, 1]
     np.testing.assert_allclose(scores, got[rows, cols])
 
@@ -130,8 +130,10 @@ def test_persons_are_the_boxes_with_an_identity():
     np.testing.assert_array_equal(one[0], boxes[0][2])
     np.testing.assert_array_equal(one[1], boxes[1][0])
     assert one[2] is None and B.boxes_of_person(boxes, ids, 7) == [None, None, None]
-    dense = B.dense_boxes([one], 3)
-    assert dense.shape == (1, 3, 4) and np.isnan(dense[0, 2]).all() and not np.isnan(dense[0, :2]).any()
+    dense = B.PersonBoxes.from_lists([one], 3, ids=[1])
+    assert dense.boxes.shape == (1, 3, 4) and dense.has_box.tolist() == [[True, True, False]]
+    assert dense.box(0, 2) is None and (dense.box(0, 1) == one[1]).all() and dense.support(0) == [0, 1]
+    assert dense.ids.tolist() == [1] and dense.score(0, 0) is None and not dense.boxes[0, 2].any()
 
 
 def test_predicted_persons_take_the_identity_they_overlap_best_box_only_people_included():
@@ -143,10 +145,12 @@ def test_predicted_persons_take_the_identity_they_overlap_best_box_only_people_i
     view1 = SimpleNamespace(boxes=np.array([[10.0, 10, 60, 200]]), box_person_ids=np.array([4]))
     sample = SimpleNamespace(views=[view0, view1])
     on_other = [[128.0, 45, 208, 238], None]  # the box-only person, seen in view 0: overlaps person 4 too
-    assert B.mean_view_iou(B.dense_boxes([on_other], 2), B.dense_boxes([[a, view1.boxes[0]]], 2))[0, 0] > 0.1
+    as_boxes = B.PersonBoxes.from_lists
+    assert B.mean_view_iou(as_boxes([on_other], 2), as_boxes([[a, view1.boxes[0]]], 2))[0, 0] > 0.1
     on_a = [[102.0, 52, 158, 238], [12.0, 11, 61, 199]]
     far = [[0.0, 0, 5, 5], None]
     assert B.ground_truth_ids(sample, [on_other, on_a, far]) == [None, 4, None]
+    assert B.ground_truth_ids(sample, as_boxes([on_other, on_a, far], 2)) == [None, 4, None]  # the dense form
     # Alone it still goes to the box-only person; were that box not in the file, the mean IoU of 0.1 and more
     # would score it against person 4 (what offering only the identified boxes did before 2026-12-05).
     assert B.ground_truth_ids(sample, [on_other]) == [None]

@@ -16,7 +16,7 @@ import pytest
 from conftest import write_tiny_mvor
 from service_harness import REPO_ROOT, Server, free_port, tiny_checkpoints
 
-from posenet.boxes import assign, mean_view_iou
+from posenet.boxes import PersonBoxes, assign, mean_view_iou
 from posenet.data.mvor import MvorDataset
 from service.client import ClientConfig, append_line, lock_output, predictions, read_done, run
 
@@ -45,12 +45,12 @@ def test_association_recovers_a_permutation_and_respects_missing_views():
     gt_list = [[list(b) for b in person] for person in gt]
     assert assign(pred, gt_list) == perm.tolist()
     # A view where only one side has a box scores 0: the mean over 3 views of (1, 1, 0) is 2/3.
-    one = np.array([[[0, 0, 10, 10], [0, 0, 10, 10], [np.nan] * 4]], float)
-    two = np.array([[[0, 0, 10, 10], [0, 0, 10, 10], [0, 0, 10, 10]]], float)
+    one = PersonBoxes.from_lists([[[0, 0, 10, 10], [0, 0, 10, 10], None]], 3)
+    two = PersonBoxes.from_lists([[[0, 0, 10, 10], [0, 0, 10, 10], [0, 0, 10, 10]]], 3)
     np.testing.assert_allclose(mean_view_iou(one, two), [[2 / 3]])
     assert assign([[[0, 0, 1, 1], None, None]], gt_list) == [None]  # no overlap: no identity
-    with pytest.raises(ValueError, match=r"\(P, V, 4\)"):
-        mean_view_iou(np.zeros((1, 3, 4)), np.zeros((1, 2, 4)))
+    with pytest.raises(ValueError, match="same views"):
+        mean_view_iou(one, PersonBoxes.from_lists([[None, None]], 2))
 
 
 def client_cmd(data, url, out, *extra) -> list[str]:

@@ -11,10 +11,11 @@ import pytest
 import torch
 
 from pipeline.two_stage import PersonResult, SceneResult
+from posenet.boxes import PersonBoxes
 from posenet.data.images import subsample_color, subsample_depth
 from posenet.net.inputs import reduction
 from service.decode import decode_color, decode_depth
-from service.response import _restore_sent_boxes
+from service.response import _sent_boxes
 from service.validation import Limits, parse_scene, validate_scene
 
 FRAME = Path(__file__).resolve().parents[2] / "examples" / "frame"
@@ -66,11 +67,12 @@ def test_cameras_and_boxes_follow_and_answers_keep_the_pixels_as_sent():
         np.testing.assert_allclose(b, (a + 0.5) / 2 - 0.5, atol=1e-4)
     # Detector mode: boxes found in the reduced images are answered in the pixels of the images as sent.
     detect = validate_scene(parse_scene((FRAME / "scene.json").read_text(), limits), _files(), limits, True)
-    person = PersonResult(np.zeros((10, 3)), np.zeros(10), np.zeros(10), id=0,
-                          boxes=[np.array([10.0, 20.0, 60.0, 120.0]), None, None], scores=[0.9, None, None])  # fmt: skip
-    _restore_sent_boxes([person], detect)
-    np.testing.assert_allclose(person.boxes[0], [20.5, 40.5, 120.5, 240.5])
-    assert SceneResult("detector", [person]).persons[0].support == [0]
+    found = PersonBoxes.from_lists([[[10.0, 20.0, 60.0, 120.0], None, None]], 3, scores=[[0.9, None, None]])
+    person = PersonResult(np.zeros((10, 3)), np.zeros(10), np.zeros(10), id=0, person_boxes=found, row=0)
+    sent = _sent_boxes(SceneResult("detector", [person], found), detect)
+    np.testing.assert_allclose(sent.boxes[0, 0], [20.5, 40.5, 120.5, 240.5])
+    assert sent.support(0) == person.support == [0] and sent.score(0, 0) == pytest.approx(0.9)
+    np.testing.assert_array_equal(person.boxes[0], [10.0, 20.0, 60.0, 120.0])  # the pipeline's own are kept
 
 
 @pytest.mark.parametrize("color_format", ["png", "jpg"])
