@@ -193,14 +193,16 @@ def test_a_non_finite_estimate_is_never_sent_as_null():
     # The inputs are bounded so that this should not happen; if the models still give NaN, the client gets a
     # 422 that says what to check rather than a 200 whose numbers are null.
     from pipeline.two_stage import PersonResult, SceneResult
+    from posenet.boxes import PersonBoxes
     from service.response import encode
 
     scene = validate([{"camera": camera(), "boxes": [[1, 2, 30, 40]], "person_ids": [7]}], parts(1))
     joints = np.zeros((10, 3))
     joints[3, 1] = np.nan
-    person = PersonResult(joints, np.full(10, 40.0), np.ones(10), id=7, boxes=[scene.boxes[0][0]], scores=[None],
+    boxes = PersonBoxes.from_lists([[scene.boxes[0][0]]], 1, ids=[7])
+    person = PersonResult(joints, np.full(10, 40.0), np.ones(10), id=7, person_boxes=boxes, row=0,
                           box_indices=[(0,)])  # fmt: skip
-    result = SceneResult("reference_boxes", [person], {"detect": 0.0, "match": 0.0, "pose": 1.0})
+    result = SceneResult("reference_boxes", [person], boxes, {"detect": 0.0, "match": 0.0, "pose": 1.0})
     with pytest.raises(InputError, match="person 7 is not finite: check the cameras") as err:
         encode(result, scene, 1.0, 0.0)
     assert err.value.status == 422
