@@ -167,3 +167,28 @@ def test_box_coverage_is_the_covered_fraction_of_the_second_box():
     assert box_coverage(half, big) == pytest.approx(0.5)
     assert box_coverage(np.stack([big, half]), big).tolist() == pytest.approx([1.0, 0.5])  # broadcast
     assert box_coverage(big, np.array([3.0, 3, 3, 3])) == 0.0  # nothing to cover
+
+
+def test_person_boxes_round_trip_select_rescale_and_refuse_bad_boxes(xyxy):
+    lists = [[xyxy[0], None, xyxy[1]], [None, xyxy[2], None]]
+    boxes = B.PersonBoxes.from_lists(lists, 3, ids=[7, 3], scores=[[0.9, None, 0.4], [None, None, None]])
+    for p, per_view in enumerate(lists):  # the dense form gives back every entry, and None where there is none
+        assert [None if b is None else b.tolist() for b in per_view] == [
+            None if boxes.box(p, v) is None else boxes.box(p, v).tolist() for v in range(3)
+        ]
+    assert boxes.support(0) == [0, 2] and boxes.score(0, 2) == 0.4 and boxes.score(1, 1) is None
+    second = boxes.select([1])
+    assert len(second) == 1 and second.ids.tolist() == [3] and second.support(0) == [1]
+    # rescaling is the camera rule per view, a view of factor 1 untouched bit for bit, the mask and scores kept
+    half = boxes.rescaled([0.5, 1, 2])
+    np.testing.assert_array_equal(half.boxes[0, 0], (xyxy[0] + 0.5) * 0.5 - 0.5)
+    np.testing.assert_array_equal(half.boxes[1, 1], xyxy[2])
+    np.testing.assert_array_equal(half.boxes[0, 2], B.scale_xyxy(xyxy[1], 2.0))
+    assert (half.has_box == boxes.has_box).all() and not half.boxes[0, 1].any()
+    np.testing.assert_array_equal(half.scores, boxes.scores)
+    with pytest.raises(ValueError, match=r"person 1, view 0: box must be finite xyxy"):
+        B.PersonBoxes.from_lists([[None], [[5.0, 5, 4, 9]]], 1, check=True)
+    with pytest.raises(ValueError, match=r"person 0 has 2 box entries, expected one per view \(3\)"):
+        B.PersonBoxes.from_lists([[None, None]], 3)
+    with pytest.raises(ValueError, match=r"has_box \(P, V\)"):
+        B.PersonBoxes(np.zeros((2, 3, 4)), np.zeros((2, 2), bool), None)
