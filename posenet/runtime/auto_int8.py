@@ -62,12 +62,9 @@ class Cost:
 # and the exporter): the shipped weights. The pose network's U-Net moves MPJPE, the detector AP50 (its boxes then
 # move MPJPE in detector mode, which the pose network's row already includes with reference boxes).
 KNOWN_COST = {
-    # posenet/weights/default (2026-12-06, trained with mesh bodies), 36 random-rig calibration scenes: day 4 twin
-    # 4.54 -> 4.57 cm, alt 6.67 -> 6.75, alt-mesh 6.66 -> 6.74 (benchmarks/RESULTS.md, "int8 for the mesh-body pose
-    # weights", 2026-12-06).
-    "unet-9f9907f3e89d7ba20e62": Cost(
-        0.084, 0.0, "benchmarks/RESULTS.md 2026-12-06, day 4 twin, alt and alt-mesh"
-    ),
+    # posenet/weights/default (2026-12-05), 36 random-rig calibration scenes: twin 4.82 -> 4.87 cm, alt 6.90 -> 6.99 cm
+    # (benchmarks/RESULTS.md, "int8 calibrated from the package alone", 2026-12-06).
+    "unet-c1fe67b2c82da2823442": Cost(0.09, 0.0, "benchmarks/RESULTS.md 2026-12-06, day 4 twin and alt"),
     # detector/weights/default of commit 716bd7b (2026-12-06, fine-tuned with hard negatives), the same scenes:
     # day-4 AP50 twin 0.966 -> 0.968, alt 0.953 -> 0.954, alt-mesh 0.950 -> 0.949 (benchmarks/RESULTS.md, "int8
     # for the hard-negative detector"). With reference boxes the detector moves no MPJPE (0.0 here); the pose
