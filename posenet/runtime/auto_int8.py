@@ -62,9 +62,12 @@ class Cost:
 # and the exporter): the shipped weights. The pose network's U-Net moves MPJPE, the detector AP50 (its boxes then
 # move MPJPE in detector mode, which the pose network's row already includes with reference boxes).
 KNOWN_COST = {
-    # posenet/weights/default (2026-12-05), 36 random-rig calibration scenes: twin 4.82 -> 4.87 cm, alt 6.90 -> 6.99 cm
-    # (benchmarks/RESULTS.md, "int8 calibrated from the package alone", 2026-12-06).
-    "unet-c1fe67b2c82da2823442": Cost(0.09, 0.0, "benchmarks/RESULTS.md 2026-12-06, day 4 twin and alt"),
+    # posenet/weights/default (2026-12-07, trained with mesh bodies), 36 random-rig calibration scenes: day 4 twin
+    # 4.56 -> 4.57 cm, alt 6.69 -> 6.77, alt-mesh 6.69 -> 6.74 (benchmarks/RESULTS.md, "int8 for the mesh-body pose
+    # weights", 2026-12-07).
+    "unet-b16460610c56df806233": Cost(
+        0.073, 0.0, "benchmarks/RESULTS.md 2026-12-07, day 4 twin, alt and alt-mesh"
+    ),
     # detector/weights/default of commit 716bd7b (2026-12-06, fine-tuned with hard negatives), the same scenes:
     # day-4 AP50 twin 0.966 -> 0.968, alt 0.953 -> 0.954, alt-mesh 0.950 -> 0.949 (benchmarks/RESULTS.md, "int8
     # for the hard-negative detector"). With reference boxes the detector moves no MPJPE (0.0 here); the pose
