@@ -104,14 +104,9 @@ class PersonResult(PersonPose):
 
     @property
     def boxes(self) -> np.ndarray:
-        """(V, 4) xyxy: the person's box in each view (the hull of its boxes there; zeros where ``has_box`` is
-        False)."""
+        """(V, 4) xyxy: the person's box in each view (the hull of its boxes there; zeros in a view outside
+        :attr:`support`)."""
         return self.person_boxes.boxes[self.row]
-
-    @property
-    def has_box(self) -> np.ndarray:
-        """(V,) bool: the views in which the person has a box."""
-        return self.person_boxes.has_box[self.row]
 
     @property
     def scores(self) -> np.ndarray:

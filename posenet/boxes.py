@@ -253,8 +253,8 @@ class PersonBoxes:
         """P persons given as P lists of ``num_views`` entries, each an xyxy box or None (and, optionally, as
         many scores or None). ``ids`` default to 0..P-1.
 
-        ``check`` refuses, naming the person and view, entries that are not one per view or a box that is not
-        finite with x1 > x0 and y1 > y0 (boxes from a client); a wrong count is refused always.
+        Refuses, naming the person, an entry count other than ``num_views``; with ``check`` also a box that is not
+        finite with x1 > x0 and y1 > y0 (boxes from a client; :meth:`validate`).
         """
         P = len(person_boxes)
         boxes = np.zeros((P, num_views, 4))

@@ -102,7 +102,7 @@ class Scene:
             all of one image size.
         boxes: (P, V, 4) float32 xyxy pixels of each person in each view (ignored where ``has_box`` is False).
             With ``has_box`` and ``person_ids``, the network's tensor form of a ``posenet.boxes.PersonBoxes``
-            (:meth:`from_person_boxes`, :attr:`person_boxes`).
+            (:meth:`from_person_boxes`).
         has_box: (P, V) bool, whether the person has a box in that view; the network runs only there.
         person_ids: (P,) int64 identities (the dataset's person ids, the client's, or 0..P-1).
         poses: (P, J, 3) float32 mm, reference frame: the ground truth, zeros where there is none.
@@ -182,11 +182,6 @@ class Scene:
             torch.from_numpy(persons.ids),
             id=id,
         )
-
-    @property
-    def person_boxes(self) -> PersonBoxes:
-        """The persons' boxes, mask and ids as the one person-boxes type (numpy; no scores)."""
-        return PersonBoxes(self.boxes.numpy(), self.has_box.numpy(), self.person_ids.numpy())
 
     @classmethod
     def from_sample(cls, sample, which: str = "annotated") -> Scene:
