@@ -37,7 +37,7 @@ import torch
 from posenet.cameras import Camera
 from posenet.net.augment import AugmentConfig
 from posenet.net.infer import PoseEstimator
-from posenet.net.inputs import InputConfig, build_scene
+from posenet.net.inputs import InputConfig, build_box_crops, build_scene
 from posenet.net.loss import mpjpe
 from posenet.net.model import ModelConfig, PoseNet
 from posenet.runtime.execution import machine_line
@@ -165,16 +165,22 @@ def profile_frame(root, index: int, threads: int, repeats: int) -> dict:
     heat.reduce()
     groups = pipe._match_skeletons(boxes, views, candidate, detected=True)[2]
     members = members_of(groups, boxes)
+    crop = cfg.inputs.mode == "crop"
+
+    def inputs():  # what box_heatmaps builds: one crop per box in crop mode, the (slot, view) grid in full mode
+        if crop:
+            return [build_box_crops(views, boxes, cfg.inputs, mirror=m) for m in mirrors]
+        return [build_scene(views, dense, has, cfg.inputs, mirror=m) for m in mirrors]
+
     with torch.inference_mode():
-        scenes = [build_scene(views, dense, has, cfg.inputs, mirror=m) for m in mirrors]
+        scenes = inputs()
         flops = model.unet.flops(*scenes[0].images.shape[-2:]) * int(has.sum()) * len(mirrors)
+        batch = torch.cat([s.images for s in scenes]) if crop else None
 
         parts = {
             "detect (for scale)": lambda: pipe.detect(views),
-            "crops (build_scene)": lambda: [
-                build_scene(views, dense, has, cfg.inputs, mirror=m) for m in mirrors
-            ],
-            "U-Net": lambda: model.heatmaps(scenes),
+            "crops (build_box_crops)" if crop else "crops (build_scene)": inputs,
+            "U-Net": (lambda: model.unet_logits(batch)) if crop else (lambda: model.heatmaps(scenes)),
             "box heatmaps (crops + U-Net + lifting)": lambda: pipe.pose.box_heatmaps(views, boxes),
             "softmax moments per box": lambda: [
                 p.__setattr__("_moments", None) or p.moments(heat.eps) for p in heat.passes
@@ -190,8 +196,9 @@ def profile_frame(root, index: int, threads: int, repeats: int) -> dict:
             "run(): match + pose stages": lambda: pipe.run(views, detected=detected),
         }
         ms = {name: 1e3 * median_time(fn, repeats) for name, fn in parts.items()}
+    crops_ms = ms["crops (build_box_crops)" if crop else "crops (build_scene)"]
     ms["lifting (box heatmaps - crops - U-Net)"] = (
-        ms["box heatmaps (crops + U-Net + lifting)"] - ms["crops (build_scene)"] - ms["U-Net"]
+        ms["box heatmaps (crops + U-Net + lifting)"] - crops_ms - ms["U-Net"]
     )
     ms["rest: Python between the parts"] = ms["run(): match + pose stages"] - sum(
         ms[k] for k in ("box heatmaps (crops + U-Net + lifting)", "softmax moments per box",

@@ -38,7 +38,7 @@ import torch
 from posenet.cameras import Camera
 from posenet.net import augment as aug
 from posenet.net import lifting
-from posenet.net.inputs import InputConfig, SceneInput, build_scene
+from posenet.net.inputs import InputConfig, SceneInput, build_box_crops, build_scene
 from posenet.net.lifting import JointEstimate
 
 Tensor = torch.Tensor
@@ -260,32 +260,42 @@ def box_heatmaps(model, views: list, boxes: Sequence[np.ndarray], inputs: InputC
     """
     if len(boxes) != len(views):
         raise ValueError(f"got {len(boxes)} box lists for {len(views)} views")
-    dense, has, view, index = slot_layout(boxes)
     mirrors = (False, True) if model.config.flip_test else (False,)
+    if inputs.mode == "crop":
+        return _crop_heatmaps(model, views, boxes, inputs, mirrors)
+    dense, has, view, index = slot_layout(boxes)
     scenes: list[SceneInput] = [build_scene(views, dense, has, inputs, mirror=m) for m in mirrors]
-    crop = inputs.mode == "crop"
-    # the only U-Net pass: the N boxes (x 2 with flips); in crop mode packed, so no (K, V) grid of zeros is
-    # filled and gathered again: box i is row ``rows[i]`` (the boxes' rank in has_box's row-major order)
-    heats = model.heatmaps(scenes, packed=crop)
+    heats = model.heatmaps(scenes)
     K, V = has.shape
-    slot = index * V + view  # (N,) each box's (k, v) slot, row-major
-    rows = torch.cumsum(has.reshape(-1).long(), 0)[slot] - 1 if crop else None
     passes = []
     for scene, heat in zip(scenes, heats, strict=True):
-        if crop:
-            box_logits = aug.unflip_channels(heat[rows], scene.flipped[slot])  # (N, J, h, w)
-            box_logits = box_logits.flatten(2)  # (N, J, M)
-        else:
-            box_logits = model.logits(scene, heat)[index, view]  # (N, J, M)
+        box_logits = model.logits(scene, heat)[index, view]  # (N, J, M)
         M = box_logits.shape[-1]
         uv = scene.uv.to(box_logits.device).expand(K, V, M, 2)
         depth = scene.depth.to(box_logits.device).expand(K, V, M)
         valid = scene.valid.to(box_logits.device)
         box = BoxPass(box_logits, uv[index, view], depth[index, view], valid[index, view])
-        if model.config.aggregation == "3d":
-            if scene.uv.shape[0] == 1:  # full mode: the views' pixel grids, shared by the boxes of a view
-                box.points = lifting.lift(scene.cameras, scene.uv, scene.depth)[0, view]  # (N, M, 3)
-            else:  # crop mode: each box's own crop pixels
-                box.points = lifting.lift(scene.cameras[view], box.uv[None], box.depth[None])[0]  # (N, M, 3)
+        if model.config.aggregation == "3d":  # the views' pixel grids, shared by the boxes of a view
+            box.points = lifting.lift(scene.cameras, scene.uv, scene.depth)[0, view]  # (N, M, 3)
         passes.append(box)
     return BoxHeatmaps(view, index, scenes[0].cameras, passes, model.estimate, model.config.eps)
+
+
+def _crop_heatmaps(
+    model, views: list, boxes: Sequence[np.ndarray], inputs: InputConfig, mirrors
+) -> BoxHeatmaps:
+    """:func:`box_heatmaps` in crop mode: one crop per box (``posenet.net.inputs.build_box_crops``), every pass in
+    one U-Net batch, no (slot, view) grid of empty pairs built, run or gathered."""
+    crops = [build_box_crops(views, boxes, inputs, mirror=m) for m in mirrors]
+    heat = model.unet_logits(torch.cat([c.images for c in crops]))
+    N = crops[0].view.shape[0]
+    index = torch.cat([torch.arange(len(np.asarray(b).reshape(-1, 4))) for b in boxes])
+    passes = []
+    for i, c in enumerate(crops):
+        logits = aug.unflip_channels(heat[i * N : (i + 1) * N], c.flipped).flatten(2)  # (N, J, M)
+        dev = logits.device
+        box = BoxPass(logits, c.uv.to(dev), c.depth.to(dev), c.valid.to(dev))
+        if model.config.aggregation == "3d":  # each box's own crop pixels
+            box.points = lifting.lift(c.cameras[c.view], box.uv[None], box.depth[None])[0]  # (N, M, 3)
+        passes.append(box)
+    return BoxHeatmaps(crops[0].view, index, crops[0].cameras, passes, model.estimate, model.config.eps)

@@ -227,6 +227,112 @@ def _sample_per_view(images: Tensor, grids: Tensor, P: int, size: tuple[int, int
     )  # (P*V, C, h, w)
 
 
+def _network_channels(rgb: Tensor | None, d_net: Tensor, mask: Tensor, config: InputConfig) -> Tensor:
+    """The U-Net's input ``(N, C, h, w)`` from each crop's sampled colour ``rgb (N, 3, h, w)`` in [0, 1] (None
+    without colour), depth ``d_net (N, 1, h, w)`` mm and box mask ``mask (N, h*w)`` (the channel list of the
+    module docstring)."""
+    h, w = d_net.shape[-2:]
+    known = d_net > 0
+    channels = []
+    if config.modality in ("rgb", "rgbd"):
+        channels.append(rgb * 2 - 1)
+    if config.modality in ("depth", "rgbd"):
+        norm = (d_net - config.depth_centre) / config.depth_range
+        channels.append(torch.where(known, norm, torch.full_like(norm, -2.0)))
+        if config.extra_depth:
+            in_box = mask.view(-1, 1, h, w) & known
+            med = torch.nanmedian(torch.where(in_box, d_net, torch.nan).flatten(1), dim=1).values  # (N,)
+            med = torch.nan_to_num(med, nan=config.depth_centre).view(-1, 1, 1, 1)
+            rel = ((d_net - med) / 1000).clamp(-1.5, 1.5)
+            channels += [torch.where(known, rel, torch.zeros_like(rel)), known.float()]
+    channels.append(mask.view(-1, 1, h, w).float())
+    return torch.cat(channels, dim=1)
+
+
+@dataclass
+class BoxCrops:
+    """The network inputs and lifting points of every box of a frame, one crop per box (crop mode, inference):
+    what :func:`build_scene` gives for the (slot, view) pairs that hold a box, without the empty pairs.
+
+    Attributes:
+        images: (N, C, h, w) network inputs of the N boxes, in view order.
+        A: (N, 3, 3) original pixels -> network pixels.
+        flipped: (N,) whether the network image is mirrored.
+        view: (N,) each box's view.
+        cameras: batch shape (V,), of the (possibly resized) images that ``uv`` refers to.
+        uv: (N, M, 2) original pixel coordinates of the crop's points; depth (N, M) mm there (0 = unknown);
+            valid (N, M) the points that may vote (in the box, known depth).
+    """
+
+    images: Tensor
+    A: Tensor
+    flipped: Tensor
+    view: Tensor
+    cameras: Camera
+    uv: Tensor
+    depth: Tensor
+    valid: Tensor
+
+
+def build_box_crops(
+    views: Sequence[SceneView], boxes: Sequence[np.ndarray], config: InputConfig, mirror: bool = False
+) -> BoxCrops:
+    """:func:`build_scene` at test time in crop mode for V lists of boxes ``(K_v, 4)`` xyxy (K_v may be 0), packed:
+    the crop of box i equals ``build_scene``'s for its (slot, view) pair bit for bit, and no crop is computed for a
+    pair without a box (``posenet.net.box_poses.box_heatmaps``: 17 boxes of 3 views make 17 crops, not 8 x 3)."""
+    if config.mode != "crop":
+        raise ValueError("build_box_crops is for crop mode; use build_scene in full mode")
+    if not views:
+        raise ValueError("a scene needs at least one view")
+    views = scene_views(views)
+    V = len(views)
+    if len(boxes) != V:
+        raise ValueError(f"got {len(boxes)} box lists for {V} views")
+    if config.modality != "depth" and any(v.color is None for v in views):
+        raise ValueError(f"modality {config.modality!r} needs colour images, but a view has none")
+    per_view = [torch.as_tensor(np.asarray(b, np.float32).reshape(-1, 4)) for b in boxes]
+    counts = [len(b) for b in per_view]
+    view = torch.repeat_interleave(torch.arange(V), torch.tensor(counts, dtype=torch.long))  # (N,)
+    flat = torch.cat(per_view) if per_view else torch.zeros(0, 4)
+    if config.read_size is not None:
+        resized = [resize_view(v.color, v.depth, v.camera, config.read_size) for v in views]
+        factors = torch.tensor([r[3] for r in resized], dtype=torch.float32).repeat(1, 2)  # (V, 4)
+        flat = rescale_pixels(flat, factors[view])
+        views = [SceneView(*r[:3]) for r in resized]
+    color, depth, cameras = _stack_views(views)
+    H, W = depth.shape[-2:]
+    size = config.network_size(False)
+    w, h = size
+    N = flat.shape[0]
+    A = aug.box_crop_affine(flat, config.crop_size, config.crop_margin)
+    flipped = torch.full((N,), mirror, dtype=torch.bool)
+    if mirror:
+        A = aug.hflip(flipped, size[0]) @ A
+    src = aug.network_pixels_in_original(A, size)  # (N, h*w, 2)
+    mask = _in_box(src, flat)  # (N, h*w)
+    grids = aug._normalise(src, (W, H))
+
+    def sample(images: Tensor, mode: str) -> Tensor:  # one grid_sample per view, its crops side by side
+        out, start = [], 0
+        for v, n in enumerate(counts):
+            if n:
+                grid = grids[start : start + n].view(n, h, w, 2).permute(1, 0, 2, 3).reshape(1, h, n * w, 2)
+                got = torch.nn.functional.grid_sample(
+                    images[v : v + 1], grid, mode=mode, padding_mode="zeros", align_corners=False
+                )
+                out.append(got.view(images.shape[1], h, n, w).permute(2, 0, 1, 3))
+            start += n
+        if not out:
+            return images.new_zeros(0, images.shape[1], h, w)
+        return torch.cat(out).contiguous()
+
+    d_net = sample(depth, "nearest")  # (N, 1, h, w)
+    rgb = sample(color, "bilinear") if config.modality in ("rgb", "rgbd") else None
+    images = _network_channels(rgb, d_net, mask, config)
+    d = d_net.reshape(N, h * w)
+    return BoxCrops(images, A, flipped, view, cameras, src, d, mask & (d > 0))
+
+
 def build_scene(
     views: Sequence[SceneView],
     boxes: Tensor,
@@ -299,26 +405,14 @@ def build_scene(
     mask = _in_box(src, safe) & has_box.reshape(-1, 1)  # (P*V, h*w)
     grids = _view_grids(src, P, V, size, (W, H))  # colour and depth share the image size
     d_net = _sample_per_view(depth, grids, P, size, "nearest")  # (P*V, 1, h, w)
-    known = d_net > 0
-    channels = []
+    rgb = None
     if config.modality in ("rgb", "rgbd"):
         rgb = _sample_per_view(color, grids, P, size, "bilinear")
         if training and augment.color:
             rgb = aug.color_jitter(rgb, augment, generator)
         if training and augment.color_drop > 0:
             rgb = aug.color_dropout(rgb, augment.color_drop, generator)
-        channels.append(rgb * 2 - 1)
-    if config.modality in ("depth", "rgbd"):
-        norm = (d_net - config.depth_centre) / config.depth_range
-        channels.append(torch.where(known, norm, torch.full_like(norm, -2.0)))
-        if config.extra_depth:
-            in_box = mask.view(-1, 1, h, w) & known
-            med = torch.nanmedian(torch.where(in_box, d_net, torch.nan).flatten(1), dim=1).values  # (P*V,)
-            med = torch.nan_to_num(med, nan=config.depth_centre).view(-1, 1, 1, 1)
-            rel = ((d_net - med) / 1000).clamp(-1.5, 1.5)
-            channels += [torch.where(known, rel, torch.zeros_like(rel)), known.float()]
-    channels.append(mask.view(-1, 1, h, w).float())
-    images = torch.cat(channels, dim=1)  # (P*V, C, h, w)
+    images = _network_channels(rgb, d_net, mask, config)  # (P*V, C, h, w)
     if training and augment.occlude > 0:
         images = aug.occluders(images, augment.occlude, generator)
 

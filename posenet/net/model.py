@@ -113,12 +113,8 @@ class PoseNet(nn.Module):
         """
         device = next(self.parameters()).device
         runs = [s.has_box.reshape(-1).to(device) for s in scenes]  # (P*V,) per scene
-        x = torch.cat([s.images.to(device)[r] for s, r in zip(scenes, runs, strict=True)])
-        if self.config.channels_last:
-            x = x.contiguous(memory_format=torch.channels_last)
+        out = self.unet_logits(torch.cat([s.images.to(device)[r] for s, r in zip(scenes, runs, strict=True)]))
         J = self.config.unet.out_channels
-        out = self._unet(x) if x.shape[0] else x.new_zeros(0, J, *x.shape[-2:])
-        out = out.float().contiguous()
         heats, start = [], 0
         for s, r in zip(scenes, runs, strict=True):
             n = int(r.sum())
@@ -130,6 +126,16 @@ class PoseNet(nn.Module):
                 heats.append(heat)
             start += n
         return heats
+
+    def unet_logits(self, x: Tensor) -> Tensor:
+        """The U-Net (or the runtime that replaces it) on network inputs ``x (N, C, h, w)``: float32 logits
+        ``(N, J, h, w)``."""
+        x = x.to(next(self.parameters()).device)
+        if self.config.channels_last:
+            x = x.contiguous(memory_format=torch.channels_last)
+        if not x.shape[0]:
+            return x.new_zeros(0, self.config.unet.out_channels, *x.shape[-2:])
+        return self._unet(x).float().contiguous()
 
     def forward(self, scenes: SceneInput | list[SceneInput]) -> PoseOutput | list[PoseOutput]:
         """One scene -> its :class:`PoseOutput`; a list of scenes -> a list (one U-Net pass for them all)."""

@@ -5,7 +5,8 @@ import torch
 
 from posenet.cameras import Camera
 from posenet.net import augment as aug
-from posenet.net.inputs import InputConfig, build_scene
+from posenet.net.box_poses import slot_layout
+from posenet.net.inputs import InputConfig, build_box_crops, build_scene
 from posenet.skeleton import FLIP_PERMUTATION, JOINTS
 
 
@@ -112,6 +113,38 @@ def test_crop_points_carry_original_pixels_and_depth():
     assert (scene.depth.reshape(-1)[~inside] == 0).all()
     assert not scene.valid.reshape(-1)[scene.depth.reshape(-1) == 0].any()
     assert scene.images.shape == (2, cfg.in_channels, 32, 32)
+
+
+def test_packed_box_crops_equal_the_scene_crops_bit_for_bit():
+    """build_box_crops (inference: one crop per box) against build_scene's (slot, view) pairs that hold a box:
+    3 views with 2 / 0 / 3 boxes, read at half size (the resize inside), plain and mirrored."""
+    rng = np.random.default_rng(1)
+    H, W = 60, 80
+    views = []
+    for i in range(3):
+        depth = rng.integers(800, 5000, (H, W)).astype(np.uint16)
+        depth[rng.random((H, W)) < 0.1] = 0
+        color = rng.integers(0, 255, (H, W, 3)).astype(np.uint8)
+        views.append((color, depth, Camera.create(50 + i, 52, 40, 30)))
+    boxes = [
+        np.array([[2.0, 10, 40, 50], [30.5, 5, 78, 58]], np.float32),
+        np.zeros((0, 4), np.float32),
+        np.array([[0.0, 0, 20, 30], [10, 12.5, 70, 59], [50, 20, 79, 40]], np.float32),
+    ]
+    cfg = InputConfig(mode="crop", crop_size=32, source_size=(40, 30))
+    dense, has, view, index = slot_layout(boxes)
+    slot = index * 3 + view  # each box's row of the (slot, view) grid
+    for mirror in (False, True):
+        scene = build_scene(views, dense, has, cfg, mirror=mirror)
+        crops = build_box_crops(views, boxes, cfg, mirror=mirror)
+        assert torch.equal(crops.view, view)
+        assert torch.equal(crops.images, scene.images[slot])
+        assert torch.equal(crops.A, scene.A[slot]) and torch.equal(crops.flipped, scene.flipped[slot])
+        assert torch.equal(crops.uv, scene.uv.flatten(0, 1)[slot])
+        assert torch.equal(crops.depth, scene.depth.flatten(0, 1)[slot])
+        assert torch.equal(crops.valid, scene.valid.flatten(0, 1)[slot])
+    empty = build_box_crops(views, [np.zeros((0, 4), np.float32)] * 3, cfg)
+    assert empty.images.shape == (0, cfg.in_channels, 32, 32) and empty.uv.shape == (0, 32 * 32, 2)
 
 
 def test_affine_inverse_matches_linalg():
