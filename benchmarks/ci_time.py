@@ -3,8 +3,8 @@
     python benchmarks/ci_time.py --before 2f214a0                 # against HEAD
     python benchmarks/ci_time.py --before 2f214a0 --after a029d1f --json ci.json
 
-Each commit is checked out into a temporary git worktree beside this repository (so that ``../shared`` is where
-the tests expect it) and runs the README's test command, ``pytest -q``, with ``--durations=0``, in this
+Each commit is checked out into a git worktree beside this repository (``../.ci_time_SHA``, removed after, so
+that ``../shared`` is where the tests expect it) and runs the README's test command, ``pytest -q``, with ``--durations=0``, in this
 environment (``PYTHONPATH`` set to the worktree, so that every subprocess a test starts imports that commit's
 code). The table gives each run's wall time and test count, then the tests present at both commits (matched by
 test name and parameters: a test that moved to another file is still the same test) summed before and after, and
@@ -20,7 +20,6 @@ import os
 import re
 import subprocess
 import sys
-import tempfile
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -47,20 +46,21 @@ def run_suite(commit: str, select: str | None = None) -> dict:
     """pytest at ``commit`` in a temporary worktree beside this repository: wall seconds, counts, durations."""
     sha = subprocess.run(["git", "rev-parse", "--short", commit], cwd=ROOT, check=True, capture_output=True,
                          text=True).stdout.strip()  # fmt: skip
-    with tempfile.TemporaryDirectory(dir=ROOT.parent, prefix=f".ci_time_{sha}_") as tmp:
-        tree = Path(tmp) / "tree"
-        subprocess.run(["git", "worktree", "add", "-q", "--detach", str(tree), sha], cwd=ROOT, check=True)
-        try:
-            env = {**os.environ, "PYTHONPATH": str(tree), "HF_HUB_OFFLINE": "1"}
-            t0 = time.perf_counter()
-            done = subprocess.run(
-                [sys.executable, "-m", "pytest", "-q", "--durations=0", "-p", "no:cacheprovider"]
-                + (["-k", select] if select else []),
-                cwd=tree, env=env, capture_output=True, text=True,
-            )  # fmt: skip
-            wall = time.perf_counter() - t0
-        finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, check=False)
+    tree = ROOT.parent / f".ci_time_{sha}"  # beside the repository, so that the tests find ../shared
+    subprocess.run(
+        ["git", "worktree", "add", "-q", "--detach", "--force", str(tree), sha], cwd=ROOT, check=True
+    )
+    try:
+        env = {**os.environ, "PYTHONPATH": str(tree), "HF_HUB_OFFLINE": "1"}
+        t0 = time.perf_counter()
+        done = subprocess.run(
+            [sys.executable, "-m", "pytest", "-q", "--durations=0", "-p", "no:cacheprovider"]
+            + (["-k", select] if select else []),
+            cwd=tree, env=env, capture_output=True, text=True,
+        )  # fmt: skip
+        wall = time.perf_counter() - t0
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=ROOT, check=False)
     summary = done.stdout.strip().splitlines()[-1] if done.stdout.strip() else ""
     counts = {k: int(n) for n, k in re.findall(r"(\d+) (passed|failed|skipped|errors?)", summary)}
     return {"commit": sha, "wall_s": round(wall, 1), "returncode": done.returncode, "summary": summary,
