@@ -131,7 +131,9 @@ class PoseNet(nn.Module):
         """The U-Net (or the runtime that replaces it) on network inputs ``x (N, C, h, w)``: float32 logits
         ``(N, J, h, w)``."""
         x = x.to(next(self.parameters()).device)
-        if self.config.channels_last:
+        if self.config.channels_last and (self.runner is None or torch.is_grad_enabled()):
+            # torch's convolutions only: an exported graph reads NCHW, and a channels_last tensor would be
+            # copied there again on its way in (posenet.runtime.graphs)
             x = x.contiguous(memory_format=torch.channels_last)
         if not x.shape[0]:
             return x.new_zeros(0, self.config.unet.out_channels, *x.shape[-2:])
