@@ -287,7 +287,7 @@ def _crop_heatmaps(
     """:func:`box_heatmaps` in crop mode: one crop per box (``posenet.net.inputs.build_box_crops``), every pass in
     one U-Net batch, no (slot, view) grid of empty pairs built, run or gathered."""
     crops = [build_box_crops(views, boxes, inputs, mirror=m) for m in mirrors]
-    heat = model.unet_logits(torch.cat([c.images for c in crops]))
+    heat = model.unet_logits(crops[0].images if len(crops) == 1 else torch.cat([c.images for c in crops]))
     N = crops[0].view.shape[0]
     index = torch.cat([torch.arange(len(np.asarray(b).reshape(-1, 4))) for b in boxes])
     passes = []

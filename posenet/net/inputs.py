@@ -230,23 +230,28 @@ def _sample_per_view(images: Tensor, grids: Tensor, P: int, size: tuple[int, int
 def _network_channels(rgb: Tensor | None, d_net: Tensor, mask: Tensor, config: InputConfig) -> Tensor:
     """The U-Net's input ``(N, C, h, w)`` from each crop's sampled colour ``rgb (N, 3, h, w)`` in [0, 1] (None
     without colour), depth ``d_net (N, 1, h, w)`` mm and box mask ``mask (N, h*w)`` (the channel list of the
-    module docstring)."""
-    h, w = d_net.shape[-2:]
+    module docstring). Each channel is written into its place of one tensor (no list of channels concatenated)."""
+    N, h, w = d_net.shape[0], *d_net.shape[-2:]
+    out = d_net.new_empty(N, config.in_channels, h, w)
     known = d_net > 0
-    channels = []
+    c = 0
     if config.modality in ("rgb", "rgbd"):
-        channels.append(rgb * 2 - 1)
+        torch.mul(rgb, 2, out=out[:, :3]).sub_(1)
+        c = 3
     if config.modality in ("depth", "rgbd"):
         norm = (d_net - config.depth_centre) / config.depth_range
-        channels.append(torch.where(known, norm, torch.full_like(norm, -2.0)))
+        torch.where(known, norm, torch.full_like(norm, -2.0), out=out[:, c : c + 1])
+        c += 1
         if config.extra_depth:
             in_box = mask.view(-1, 1, h, w) & known
             med = torch.nanmedian(torch.where(in_box, d_net, torch.nan).flatten(1), dim=1).values  # (N,)
             med = torch.nan_to_num(med, nan=config.depth_centre).view(-1, 1, 1, 1)
             rel = ((d_net - med) / 1000).clamp(-1.5, 1.5)
-            channels += [torch.where(known, rel, torch.zeros_like(rel)), known.float()]
-    channels.append(mask.view(-1, 1, h, w).float())
-    return torch.cat(channels, dim=1)
+            torch.where(known, rel, torch.zeros_like(rel), out=out[:, c : c + 1])
+            out[:, c + 1 : c + 2].copy_(known)
+            c += 2
+    out[:, c : c + 1].copy_(mask.view(-1, 1, h, w))
+    return out
 
 
 @dataclass
