@@ -105,9 +105,8 @@ class PoseNet(nn.Module):
         with self._autocast(x.device):
             return self.unet(x)
 
-    def heatmaps(self, scenes: list[SceneInput], packed: bool = False) -> list[Tensor]:
-        """U-Net logits ``(P*V, J, h, w)`` per scene, zeros for (person, view) pairs without a box; with
-        ``packed``, only the pairs with a box: ``(n, J, h, w)`` in the order of ``has_box.reshape(-1)``.
+    def heatmaps(self, scenes: list[SceneInput]) -> list[Tensor]:
+        """U-Net logits ``(P*V, J, h, w)`` per scene, zeros for (person, view) pairs without a box.
 
         Every pair of every scene runs in one U-Net batch (scenes of one batch share the network input size).
         """
@@ -118,12 +117,9 @@ class PoseNet(nn.Module):
         heats, start = [], 0
         for s, r in zip(scenes, runs, strict=True):
             n = int(r.sum())
-            if packed:
-                heats.append(out[start : start + n])
-            else:
-                heat = out.new_zeros(r.shape[0], J, *s.images.shape[-2:])
-                heat[r] = out[start : start + n]
-                heats.append(heat)
+            heat = out.new_zeros(r.shape[0], J, *s.images.shape[-2:])
+            heat[r] = out[start : start + n]
+            heats.append(heat)
             start += n
         return heats
 
