@@ -24,8 +24,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from posenet.runtime.execution import machine_line  # noqa: E402
+from posenet.runtime.execution import machine_line
 
 ROOT = Path(__file__).resolve().parents[1]
 _DURATION = re.compile(r"\s*([\d.]+)s (?:call|setup|teardown)\s+(\S+)")

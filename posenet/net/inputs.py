@@ -178,6 +178,18 @@ def resize_view(
     return color, depth, Camera(K, camera.extrinsics, camera.distortion, new), (sx, sy)
 
 
+def _at_read_size(
+    views: Sequence[SceneView], config: InputConfig
+) -> tuple[Sequence[SceneView], Tensor | None]:
+    """The views resized to ``config.read_size`` (:func:`resize_view`) and each view's box factors ``(V, 4)``
+    (sx, sy, sx, sy); the views as given and None when the config reads them as given."""
+    if config.read_size is None:
+        return views, None
+    resized = [resize_view(v.color, v.depth, v.camera, config.read_size) for v in views]
+    factors = torch.tensor([r[3] for r in resized], dtype=torch.float32).repeat(1, 2)
+    return [SceneView(*r[:3]) for r in resized], factors
+
+
 def _stack_views(
     views: Sequence[SceneView],
 ) -> tuple[Tensor | None, Tensor, Camera]:
@@ -299,11 +311,9 @@ def build_box_crops(
     counts = [len(b) for b in per_view]
     view = torch.repeat_interleave(torch.arange(V), torch.tensor(counts, dtype=torch.long))  # (N,)
     flat = torch.cat(per_view) if per_view else torch.zeros(0, 4)
-    if config.read_size is not None:
-        resized = [resize_view(v.color, v.depth, v.camera, config.read_size) for v in views]
-        factors = torch.tensor([r[3] for r in resized], dtype=torch.float32).repeat(1, 2)  # (V, 4)
+    views, factors = _at_read_size(views, config)
+    if factors is not None:
         flat = rescale_pixels(flat, factors[view])
-        views = [SceneView(*r[:3]) for r in resized]
     color, depth, cameras = _stack_views(views)
     H, W = depth.shape[-2:]
     size = config.network_size(False)
@@ -371,14 +381,9 @@ def build_scene(
         )
     if config.modality != "depth" and any(v.color is None for v in views):
         raise ValueError(f"modality {config.modality!r} needs colour images, but a view has none")
-    target = config.read_size
-    if target is not None:
-        resized = [resize_view(v.color, v.depth, v.camera, target) for v in views]
-        factors = torch.tensor([r[3] for r in resized], dtype=torch.float32).repeat(
-            1, 2
-        )  # (V, 4): sx, sy, sx, sy
+    views, factors = _at_read_size(views, config)
+    if factors is not None:
         boxes = rescale_pixels(boxes, factors.view(1, V, 4))
-        views = [SceneView(*r[:3]) for r in resized]
     color, depth, cameras = _stack_views(views)
     H, W = depth.shape[-2:]
     P = boxes.shape[0]
