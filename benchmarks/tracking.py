@@ -36,7 +36,7 @@ import numpy as np
 from tqdm import tqdm
 
 from pipeline.track import Tracker, TrackerConfig, mean_joint_distance, skeleton_height
-from pipeline.track_eval import GOALS, SequenceFrame, TrackedPerson, evaluate, goal_lines, score
+from pipeline.track_eval import GOALS, SequenceFrame, TrackedPerson, breakdown, evaluate, goal_lines, score
 from posenet.data.mvor import load_annotations, pose_joints, room_up
 from posenet.runtime.execution import machine_line
 from posenet.skeleton import NUM_JOINTS
@@ -321,6 +321,10 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument("--ablation", action="store_true",
                    help="instead of one configuration, compare the tracker's cues side by side (offline tracking): "
                    "as before, + the background rule, + the body signature in the cost, + re-identification")  # fmt: skip
+    p.add_argument("--breakdown", action="store_true",
+                   help="also say where the person-frames without a track go (no skeleton, a neighbour's skeleton, "
+                   "the tracker's filters, tentative tracks, the duplicate rule, ...) and what the false positives are "
+                   "(pipeline.track_eval.breakdown; offline tracking)")  # fmt: skip
     p.add_argument("--background", action="store_true",
                    help="give the tracker each frame's depth images and cameras (offline tracking), as a stream "
                    "does: it learns the room's static depth and confirms no track on what never moved "
@@ -375,6 +379,16 @@ def main(argv: list[str] | None = None) -> dict:
             for frame_id, frame in rows:
                 frame.views = views.get(frame_id)
             report["sequences"][seq] = evaluate([f for _, f in rows], Tracker(config))
+            if args.breakdown:
+                report["sequences"][seq]["breakdown"] = b = breakdown([f for _, f in rows], Tracker(config))
+                print(
+                    f"sequence {seq}: {b['tracked']} of {b['person_frames']} annotated person-frames tracked; the rest:"
+                )
+                for name, n in b["missed"].items():
+                    print(f"  {n:>5}  {name}")
+                print("  false positives (confirmed track-frames on no annotated person):")
+                for name, n in b["false_positives"].items():
+                    print(f"  {n:>5}  {name}")
             if args.births:
                 report["sequences"][seq]["births"] = rows_of = births([f for _, f in rows], Tracker(config))
                 for b in rows_of:

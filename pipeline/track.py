@@ -221,12 +221,15 @@ class TrackedPerson:
         track_id: its track's id (ids count up from 0 in order of confirmation), None while tentative.
         joints: (J, 3) mm, smoothed and bone-corrected.
         raw: (J, 3) mm, the input joints.
+        tentative: a track took the person but is not confirmed yet (``track_id`` None); False when no track took
+            it or its track is confirmed.
     """
 
     detection: int
     track_id: int | None
     joints: np.ndarray
     raw: np.ndarray
+    tentative: bool = False
 
 
 def _norm(x: np.ndarray) -> np.ndarray:
@@ -752,7 +755,7 @@ class Tracker:
         out = [
             TrackedPerson(
                 int(p), None if self.ids[track_of[p]] < 0 else int(self.ids[track_of[p]]),
-                self.pos[track_of[p]].copy(), joints[p].copy(),
+                self.pos[track_of[p]].copy(), joints[p].copy(), tentative=bool(self.ids[track_of[p]] < 0),
             )
             if track_of[p] >= 0
             else TrackedPerson(int(p), None, joints[p].copy(), joints[p].copy())

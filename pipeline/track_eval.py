@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from pipeline.track import Tracker, bone_lengths, mean_joint_distance
+from pipeline.track import Tracker, bone_lengths, mean_joint_distance, skeleton_height, torso_length
 from posenet.skeleton import BONES, NUM_JOINTS
 
 MM_PER_CM = 10.0
@@ -325,6 +325,95 @@ def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_m
         "track_ms_p95": round(float(np.percentile(ms, 95)), 3),
         "gate_mm": gate_mm,
     }
+
+
+# Why an annotated person-frame has no confirmed track on it (:func:`breakdown`), in the order they are tested.
+MISSED = (
+    "no skeleton within the gate",  # the pipeline gave nobody there: the detector, or the pose network
+    "only a neighbour's skeleton",  # one skeleton for two people close together: it went to the other
+    "own skeleton not tracked: spread",  # the tracker's filters (TrackerConfig.max_spread_mm,
+    "own skeleton not tracked: torso",  # min_torso_mm, min_height_mm)
+    "own skeleton not tracked: height",
+    "own skeleton on a tentative track",  # birth_hits, the phantom cues or the lying rule not yet met
+    "own skeleton near a neighbour's track",  # within duplicate_mm of a track another person's skeleton took
+    "own unsure skeleton near a neighbour's track",
+    "own unsure skeleton, no track within reach",  # no confirmed track left within unsure_gate_mm
+    "own skeleton, its track went to another person",  # or its smoothed joints lie beyond the gate
+    "own skeleton, no track took it",
+)
+FALSE = (
+    "on nobody",  # no person in view within the gate: a phantom's frames
+    "second track on a person, or too far from them",
+)
+
+
+def breakdown(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GATE_MM) -> dict:
+    """Where the tracks lose person-frames: ``tracker`` over ``frames`` (in time order), then per frame the optimal
+    assignment under the gate (:func:`gated_pairs`, as the evaluation matches; tracks on persons the ground truth
+    leaves out are left out) between the annotated persons and the confirmed tracks.
+
+    Every annotated person-frame that no confirmed track matches is given the first reason of :data:`MISSED` that
+    holds. Its "own skeleton" is the pipeline's person that the optimal assignment under the gate between the
+    annotated persons and all the frame's pipeline persons (sure and unsure) gives it. Every confirmed track-frame
+    left unmatched is a false positive of :data:`FALSE`.
+
+    Returns ``{"person_frames", "tracked", "missed": {reason: count}, "false_positives": {reason: count}}`` with
+    every reason listed, zero or not."""
+    c = tracker.config
+    missed, false = dict.fromkeys(MISSED, 0), dict.fromkeys(FALSE, 0)
+    person_frames = tracked = 0
+    for fr in frames:
+        out = tracker.update(fr.joints, fr.spread, fr.timestamp_s, fr.unsure, fr.up, fr.views)
+        hyp = {p.track_id: p for p in out if p.track_id is not None}
+        left_out = _ignored(fr, hyp, gate_mm)
+        hyp = {t: p for t, p in hyp.items() if t not in left_out}
+        gt = fr.gt_joints.reshape(-1, NUM_JOINTS, 3)
+        matched = dict(gated_pairs(gt, hyp, gate_mm))  # person -> track
+        person_frames += len(gt)
+        tracked += len(matched)
+        persons = {p.detection: p for p in out}
+        own = dict(
+            gated_pairs(gt, {p.detection: TrackedPerson(p.detection, p.raw, p.raw) for p in out}, gate_mm)
+        )
+        spread_median = np.median(fr.spread, axis=1) if len(out) else np.zeros(0)
+        taken = [p for p in out if p.track_id is not None or p.tentative]
+        for g in range(len(gt)):
+            if g in matched:
+                continue
+            if g not in own:
+                near = len(out) and mean_joint_distance(gt[g : g + 1], fr.joints).min() <= gate_mm
+                missed[MISSED[1] if near else MISSED[0]] += 1
+                continue
+            p = persons[own[g]]
+            unsure = fr.unsure is not None and bool(fr.unsure[p.detection])
+            height = np.nan if fr.up is None else float(skeleton_height(p.raw, fr.up))
+            neighbours = [q.joints for q in taken if q.detection != p.detection]
+            if spread_median[p.detection] > c.max_spread_mm:
+                reason = MISSED[2]
+            elif torso_length(p.raw[None])[0] < c.min_torso_mm:
+                reason = MISSED[3]
+            elif height < c.min_height_mm:
+                reason = MISSED[4]
+            elif p.tentative:
+                reason = MISSED[5]
+            elif p.track_id is not None:
+                reason = MISSED[9]
+            elif neighbours and mean_joint_distance(p.raw[None], np.array(neighbours)).min() < c.duplicate_mm:
+                reason = MISSED[7] if unsure else MISSED[6]
+            elif unsure:
+                reason = MISSED[8]
+            else:
+                reason = MISSED[10]
+            missed[reason] += 1
+        people = (
+            gt
+            if fr.ignore_joints is None
+            else np.concatenate([gt, fr.ignore_joints.reshape(-1, NUM_JOINTS, 3)])
+        )
+        for t in set(hyp) - set(matched.values()):
+            near = len(people) and mean_joint_distance(hyp[t].joints[None], people).min() <= gate_mm
+            false[FALSE[1] if near else FALSE[0]] += 1
+    return {"person_frames": person_frames, "tracked": tracked, "missed": missed, "false_positives": false}
 
 
 def goal_lines(figures: dict) -> list[str]:

@@ -87,3 +87,39 @@ def test_a_track_on_nobody_is_a_phantom_with_its_longest_time_and_one_on_an_unan
     figures = score(frames_of(truth), hyps, [0.1] * 45)
     assert figures["phantom_tracks"] == 1 and figures["longest_on_nobody_s"] > 1.0
     assert figures["false_positives"] == 25 + 5 and figures["hota"] < 1.0  # + its 5 frames as a second track
+
+
+def test_breakdown_gives_every_untracked_person_frame_and_false_track_its_reason():
+    from pipeline.track import Tracker
+    from pipeline.track_eval import FALSE, MISSED, breakdown
+    from posenet.synth.poses import PoseParams, build_pose
+
+    body = build_pose(PoseParams())[:NUM_JOINTS]  # (J, 3) a standing adult, z up, mm
+    at = {name: body + np.array([x, y, 0.0]) for name, x, y in [
+        ("a", 0, 0), ("d", 0, 100), ("g", 0, -150),  # d shares a's skeleton; g has its own, 15 cm from a's
+        ("b", 3000, 0), ("c", -3000, 0), ("ghost", 0, 3000), ("unannotated", 0, -3000),
+    ]}  # fmt: skip
+    annotated, skeletons = ["a", "b", "c", "d", "g"], ["a", "c", "g", "ghost", "unannotated"]
+    spread = np.array([[900.0 if k == "c" else 90.0] * NUM_JOINTS for k in skeletons])  # c: too unsure
+    frames = [
+        SequenceFrame(f / FPS, np.arange(len(annotated)), np.array([at[k] for k in annotated]),
+                      np.array([at[k] for k in skeletons]), spread, ignore_joints=at["unannotated"][None])
+        for f in range(10)
+    ]  # fmt: skip
+    out = breakdown(frames, Tracker())
+    assert out["person_frames"] == 50
+    assert out["tracked"] == 8  # a, from its third frame (birth_hits)
+    assert (
+        out["missed"]
+        == {
+            **dict.fromkeys(MISSED, 0),
+            "own skeleton on a tentative track": 2,  # a's first two frames
+            "no skeleton within the gate": 10,  # b
+            "own skeleton not tracked: spread": 10,  # c
+            "only a neighbour's skeleton": 10,  # d
+            "own skeleton near a neighbour's track": 10,  # g: the duplicate rule takes it for a second skeleton of a
+        }
+    )
+    assert out["tracked"] + sum(out["missed"].values()) == out["person_frames"]
+    # the ghost's track from its third frame; the unannotated person's track is left out, as in the evaluation
+    assert out["false_positives"] == {**dict.fromkeys(FALSE, 0), "on nobody": 8}
