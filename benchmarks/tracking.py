@@ -151,10 +151,13 @@ def tracker_config(overrides: list[str]) -> TrackerConfig:
 
 
 # The tracker's cues against phantoms and for identity, one configuration per row of --ablation: (name, gives the tracker views, --set overrides).
-# "signature" weighs the body's scale in the association cost, "re-id" lets a new track take an ended or coasting
-# track's id by it (TrackerConfig.signature_mm, reid_s).
+# "parked tracks end" is the background rule before 2026-12-07 (a parked track ended; its stillness clock stopped
+# while it was unseen and restarted at any cue); "signature" weighs the body's scale in the association cost, "re-id"
+# lets a new track take an ended or coasting track's id by it (TrackerConfig.park_suspends, park_recovery,
+# signature_mm, reid_s).
 ABLATION = (
     ("as before (no views)", False, []),
+    ("+ background, parked tracks end", True, ["park_suspends=false", "park_recovery=inf"]),
     ("+ background rule", True, []),
     ("+ background + signature cost", True, ["signature_mm=300"]),
     ("+ background + re-id", True, ["reid_s=60"]),

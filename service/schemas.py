@@ -170,8 +170,10 @@ class TrackedPerson(Person):
         description="the person's track in this stream: the same number for the same person from frame to "
         "frame (0, 1, ... in order of confirmation). null while the person is not (yet) tracked: seen in "
         "fewer than 3 consecutive frames, a second detection of a tracked person, or too uncertain "
-        "(median joint spread above ORPOSE_TRACK_MAX_SPREAD_MM), or a torso shorter than any adult's "
-        "(ORPOSE_TRACK_MIN_TORSO_MM)",
+        "(median joint spread above ORPOSE_TRACK_MAX_SPREAD_MM), a torso shorter than any adult's "
+        "(ORPOSE_TRACK_MIN_TORSO_MM), or, with ORPOSE_TRACK_STATIC_SCENE, a track parked because its person "
+        "showed no sign of life (no move, nothing in front of the room's static depth, no sure upright pose) "
+        "for 0.5 s: it gets its number back once they do",
     )
     unsure: bool = Field(
         False,

@@ -161,3 +161,43 @@ def test_a_track_that_passes_from_its_person_to_a_coat_ends_within_a_second():
     assert set(parked[3:60]) == {0}  # the person, from their third frame
     assert set(parked[60 + 15 :]) == {None}  # on the coat for less than the 1 s allowed, then none
     assert set(ids(TrackerConfig(park_s=None))[60:]) == {0}  # without the rule the track stays on the coat
+
+
+def test_a_phantom_seen_every_other_frame_is_parked_within_0_7_s_and_a_hidden_person_keeps_their_id():
+    # A person walks in and stands in front of a coat; after 4 s they leave and the pose network gives the coat an
+    # unsure skeleton in every other frame. The stillness clock runs in the frames between (park_suspends), so the
+    # track is parked within 0.7 s; before, it ran only in the frames with a skeleton (about 1 s).
+    coat = person_at(-300.0, 2800.0)
+    rng = np.random.default_rng(5)
+
+    def parked_after_s(config: TrackerConfig) -> float:
+        tracker = Tracker(config)
+        for f in range(15 * 8):
+            t = f / 15
+            if t < 4:
+                truth, spread, seen = person_at(max(1700.0 - 1000.0 * t, -300.0), 2500.0), 250.0, True
+            else:
+                truth, spread, seen = coat, 500.0, f % 2 == 0
+            joints = (truth + rng.normal(0, 20, truth.shape))[None][:seen]
+            out = tracker.update(joints, np.full((len(joints), NUM_JOINTS), spread), t, up=UP, views=views(coat))
+            if t >= 4 and out and out[0].track_id is None:
+                return t - 4
+        return float("inf")
+
+    assert parked_after_s(TrackerConfig()) <= 0.7  # its 30 cm step onto the coat counts as one move
+    assert parked_after_s(TrackerConfig(park_suspends=False, park_recovery=float("inf"))) >= 0.9
+
+    # A person walking across the room is hidden from every view for 1.2 s (no skeleton: the clock runs past
+    # park_s) and walks on: the parked track is suspended, not ended, and answers them with their id again once
+    # their moves have wound the clock back under park_s.
+    tracker, ids = Tracker(), []
+    for f in range(15 * 6):
+        t = f / 15
+        truth = person_at(-1500.0 + 500.0 * t, 2500.0)
+        hidden = 2.0 <= t < 3.2
+        joints = np.zeros((0, NUM_JOINTS, 3)) if hidden else (truth + rng.normal(0, 20, truth.shape))[None]
+        out = tracker.update(joints, np.full((len(joints), NUM_JOINTS), 250.0), t, up=UP, views=views(truth))
+        ids.append(None if hidden else out[0].track_id)
+    after = [i for i in ids[int(3.2 * 15) :]]
+    assert set(ids[3:30]) == {0} and set(after) <= {None, 0}
+    assert after.index(0) <= 8 and set(after[8:]) == {0}  # back within 0.53 s, the same id
