@@ -49,7 +49,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -226,6 +226,14 @@ class TrackerConfig:
     # keeps a per-person scale for long tracks at nearly the average adult's accuracy.
     bone_scale_prior_frames: float = 300.0
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickle, the fields a pickle of an older version lacks at their defaults (a stream's tracker kept in the
+        Redis store across an upgrade of the service)."""
+        for f in fields(self):
+            if f.name not in state:
+                state[f.name] = f.default_factory() if f.default is MISSING else f.default
+        self.__dict__.update(state)
+
 
 @dataclass
 class TrackedPerson:
@@ -238,6 +246,8 @@ class TrackedPerson:
         raw: (J, 3) mm, the input joints.
         tentative: a track took the person but is not confirmed yet (``track_id`` None); False when no track took
             it or its track is confirmed.
+        parked: a confirmed track took the person but is parked (``TrackerConfig.park_suspends``: ``track_id``
+            None until it shows a sign of life again).
     """
 
     detection: int
@@ -245,6 +255,7 @@ class TrackedPerson:
     joints: np.ndarray
     raw: np.ndarray
     tentative: bool = False
+    parked: bool = False
 
 
 def _norm(x: np.ndarray) -> np.ndarray:
@@ -781,6 +792,7 @@ class Tracker:
             TrackedPerson(
                 int(p), None if self.ids[track_of[p]] < 0 or quiet[track_of[p]] else int(self.ids[track_of[p]]),
                 self.pos[track_of[p]].copy(), joints[p].copy(), tentative=bool(self.ids[track_of[p]] < 0),
+                parked=bool(self.ids[track_of[p]] >= 0 and quiet[track_of[p]]),
             )
             if track_of[p] >= 0
             else TrackedPerson(int(p), None, joints[p].copy(), joints[p].copy())

@@ -335,6 +335,7 @@ MISSED = (
     "own skeleton not tracked: torso",  # min_torso_mm, min_height_mm)
     "own skeleton not tracked: height",
     "own skeleton on a tentative track",  # birth_hits, the phantom cues or the lying rule not yet met
+    "own skeleton on a parked track",  # no sign of life for park_s (TrackerConfig.park_suspends)
     "own skeleton near a neighbour's track",  # within duplicate_mm of a track another person's skeleton took
     "own unsure skeleton near a neighbour's track",
     "own unsure skeleton, no track within reach",  # no confirmed track left within unsure_gate_mm
@@ -376,7 +377,7 @@ def breakdown(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GA
             gated_pairs(gt, {p.detection: TrackedPerson(p.detection, p.raw, p.raw) for p in out}, gate_mm)
         )
         spread_median = np.median(fr.spread, axis=1) if len(out) else np.zeros(0)
-        taken = [p for p in out if p.track_id is not None or p.tentative]
+        taken = [p for p in out if p.track_id is not None or p.tentative or p.parked]
         for g in range(len(gt)):
             if g in matched:
                 continue
@@ -396,14 +397,16 @@ def breakdown(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GA
                 reason = MISSED[4]
             elif p.tentative:
                 reason = MISSED[5]
+            elif p.parked:
+                reason = MISSED[6]
             elif p.track_id is not None:
-                reason = MISSED[9]
-            elif neighbours and mean_joint_distance(p.raw[None], np.array(neighbours)).min() < c.duplicate_mm:
-                reason = MISSED[7] if unsure else MISSED[6]
-            elif unsure:
-                reason = MISSED[8]
-            else:
                 reason = MISSED[10]
+            elif neighbours and mean_joint_distance(p.raw[None], np.array(neighbours)).min() < c.duplicate_mm:
+                reason = MISSED[8] if unsure else MISSED[7]
+            elif unsure:
+                reason = MISSED[9]
+            else:
+                reason = MISSED[11]
             missed[reason] += 1
         people = (
             gt

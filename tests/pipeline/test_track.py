@@ -510,3 +510,20 @@ def test_tracking_set_overrides_parse_flags_numbers_and_none(monkeypatch):
     for bad in (["births_apart=0"], ["no_such=1"], ["gate_mm=wide"]):
         with pytest.raises(ValueError, match="--set"):
             tracker_config(bad)
+
+
+def test_a_tracker_pickled_by_an_older_version_takes_the_new_fields_defaults():
+    # A stream's tracker lives pickled in the Redis store; after an upgrade its config lacks the new fields.
+    import pickle
+
+    tracker = Tracker(TrackerConfig(gate_mm=350.0))
+    state = tracker.config.__dict__.copy()
+    del state["park_recovery"], state["background"]
+    old = TrackerConfig.__new__(TrackerConfig)
+    old.__dict__.update(state)  # as an older version's pickle restores it: without the two fields
+    tracker.config = old
+    restored = pickle.loads(pickle.dumps(tracker))
+    assert restored.config.gate_mm == 350.0
+    assert restored.config.park_recovery == TrackerConfig().park_recovery
+    assert restored.config.background == TrackerConfig().background
+    restored.update(np.zeros((0, NUM_JOINTS, 3)), np.zeros((0, NUM_JOINTS)), 0.0)
