@@ -359,7 +359,10 @@ def main(argv: list[str] | None = None) -> dict:
         )
         for seq, rows in sequences(gt).items():
             hyps, ms = zip(*(served_tracks(lines, frame_id) for frame_id, _ in rows), strict=True)
-            report["sequences"][seq] = score([f for _, f in rows], list(hyps), list(ms))
+            report["sequences"][seq] = figures = score([f for _, f in rows], list(hyps), list(ms))
+            background = [lines[i]["response"]["timings"].get("background") for i, _ in rows]
+            if all(b is not None for b in background):  # answered since timings.background exists
+                figures["background_ms_mean"] = round(float(np.mean(background)), 3)
     else:
         if args.redetect or not args.detections.is_file():
             detect(args.data, gt, args.detections, args.backend, args.threads, args.detector_checkpoint)

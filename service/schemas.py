@@ -191,6 +191,11 @@ class TrackedPerson(Person):
 
 class StreamTimings(Timings):
     track: float = Field(..., description="the tracker's update for this frame, ms")
+    background: float = Field(
+        0.0,
+        description="of track: the room's static-depth model (learning it from the frame's depth images and "
+        "testing the persons against it; 0 with ORPOSE_TRACK_STATIC_SCENE off), ms",
+    )
     unsure: float = Field(
         0.0,
         description="of match: asking the tracker whether a person of boxes the detector was unsure of could "

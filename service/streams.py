@@ -537,7 +537,8 @@ class Frame:
         unsure = np.array([p.unsure for p in result.persons], bool)
         up_source = "scene" if scene.up is not None else "floor" if self.up is not None else "none"
         t_track = time.perf_counter()
-        tracked = stream.tracker.update(joints, spread, self.time, unsure, self.up, views=self._views(scene))
+        views = self._views(scene)
+        tracked = stream.tracker.update(joints, spread, self.time, unsure, self.up, views=views)
         track_ms = (time.perf_counter() - t_track) * 1e3
         if stream.clock is None:
             stream.clock, stream.origin = self.clock, self.origin
@@ -568,6 +569,7 @@ class Frame:
             timings=StreamTimings(
                 **out.timings.model_dump(),
                 track=track_ms,
+                background=0.0 if views is None else stream.tracker.background_ms,
                 unsure=result.unsure_ms,
                 floor=self.floor_ms,
                 wait=self.waited_ms,

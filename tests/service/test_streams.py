@@ -122,6 +122,16 @@ def test_the_room_s_up_reaches_the_tracker(tmp_path_factory, sequence, floor_up)
             assert (floor_ms[0] > 0) == looked and not any(floor_ms[1:]), floor_ms
 
 
+def test_the_static_scene_s_cost_is_answered_as_part_of_the_tracker_s(tmp_path_factory, sequence):
+    """With ORPOSE_TRACK_STATIC_SCENE on (the default) every frame's timings say what the room's static-depth model
+    took (``background``), part of ``track``; off, it is 0."""
+    env = {**reference_box_env(tmp_path_factory.mktemp("ckpt_static")), "ORPOSE_TRACK_MAX_SPREAD_MM": "5000"}
+    with Server(env) as url, httpx.Client(base_url=url, timeout=60) as client:
+        for k, t in enumerate(sequence.times):
+            timings = ok(client.post("/streams/static/frames", **sequence.form(k, t)))["timings"]
+            assert 0 < timings["background"] <= timings["track"], timings
+
+
 def test_the_floor_of_a_rendered_frame_gives_the_room_s_up(sequence):
     """posenet.rig.check.floor_of_frame (what a stream uses when the scene gives no up) on a rendered frame: the
     room frame's up within half a degree."""
@@ -227,6 +237,7 @@ def test_track_ids_stay_with_their_persons_over_a_rendered_sequence(server, sequ
                                      "clock": "client", "up": "scene"}  # fmt: skip
             assert out["mode"] == "reference_boxes" and out["timings"]["track"] >= 0
             assert out["timings"]["unsure"] == 0  # reference boxes: no unsure boxes to find persons in
+            assert out["timings"]["background"] == 0  # ORPOSE_TRACK_STATIC_SCENE off
             for p in out["persons"]:
                 assert [j["name"] for j in p["smoothed_joints"]] == list(JOINTS)
                 assert p["unsure"] is False  # reference boxes: nobody the detector was unsure of
