@@ -190,7 +190,7 @@ def test_a_phantom_seen_every_other_frame_is_parked_within_0_7_s_and_a_hidden_pe
     # A person walking across the room is hidden from every view for 1.2 s (no skeleton: the clock runs past
     # park_s) and walks on: the parked track is suspended, not ended, and answers them with their id again once
     # their moves have wound the clock back under park_s.
-    tracker, ids = Tracker(), []
+    tracker, ids, parked = Tracker(), [], []
     for f in range(15 * 6):
         t = f / 15
         truth = person_at(-1500.0 + 500.0 * t, 2500.0)
@@ -198,6 +198,9 @@ def test_a_phantom_seen_every_other_frame_is_parked_within_0_7_s_and_a_hidden_pe
         joints = np.zeros((0, NUM_JOINTS, 3)) if hidden else (truth + rng.normal(0, 20, truth.shape))[None]
         out = tracker.update(joints, np.full((len(joints), NUM_JOINTS), 250.0), t, up=UP, views=views(truth))
         ids.append(None if hidden else out[0].track_id)
+        parked.append(not hidden and out[0].parked)
     after = [i for i in ids[int(3.2 * 15) :]]
     assert set(ids[3:30]) == {0} and set(after) <= {None, 0}
+    # answered without an id while parked (TrackedPerson.parked), not as a tentative track's
+    assert [i is None for i in after] == parked[int(3.2 * 15) :]
     assert after.index(0) <= 8 and set(after[8:]) == {0}  # back within 0.53 s, the same id
