@@ -26,7 +26,11 @@ Each frame's persons (3D skeletons ``(P, J, 3)`` in mm, reference frame, with th
    ``lying_height_mm`` and of its joints' spread above ``lying_spread_mm``); such a track stays tentative and is
    judged again on its last ``birth_hits`` frames at each frame. A tentative track dies at its first miss. A
    confirmed track coasts (predicted, not reported) for up to ``max_coast_s`` without a detection, so it picks
-   its person up again after a short occlusion; then it ends.
+   its person up again after a short occlusion; then it ends. Given the frames' views (depth and cameras), a
+   tentative track is confirmed only once its person was seen to move, to stand in front of the room's static
+   depth (``pipeline.background``) or to hold a sure upright pose; a confirmed track whose person shows none of
+   these for ``park_s`` (unseen frames count) is *parked*: answered without its id until they do again
+   (``TrackerConfig.move_mm`` and ``park_s`` say how).
 3. **Smooth and keep the bones.** The Kalman update weighs each joint by its measurement variance
    ``(spread_scale x spread)^2``, so uncertain joints move less. Each track keeps the recent lengths of every
    bone of ``posenet.skeleton.BONES`` as measured; its bone-length prior is an adult's proportions
@@ -41,7 +45,7 @@ Usage::
     tracker = Tracker()
     for t, (joints, spread) in frames:            # (P, J, 3) mm and (P, J) mm, time in seconds
         for person in tracker.update(joints, spread, t):
-            person.detection, person.track_id, person.joints   # track_id None while tentative
+            person.detection, person.track_id, person.joints   # track_id None while tentative or parked
 """
 
 from __future__ import annotations
