@@ -521,12 +521,18 @@ class Tracker:
         height = np.full(len(joints), np.nan) if up is None else skeleton_height(joints, up)
         return _middle(spread, 1), height
 
-    def _usable(self, joints: np.ndarray, spread_median: np.ndarray, height: np.ndarray) -> np.ndarray:
-        """``(P,)`` the persons a track may take (spread, torso and, with the room's up, height; step 1), from
-        :meth:`_measures`."""
+    def _refused(self, joints: np.ndarray, spread_median: np.ndarray, height: np.ndarray) -> np.ndarray:
+        """``(3, P)`` the persons each filter of step 1 refuses, from :meth:`_measures`: a median spread above
+        ``max_spread_mm``, a torso shorter than ``min_torso_mm``, a height along the room's up below
+        ``min_height_mm`` (a NaN height, without an up, is refused by none)."""
         c = self.config
-        usable = (spread_median <= c.max_spread_mm) & (torso_length(joints) >= c.min_torso_mm)
-        return usable & ~(height < c.min_height_mm)  # a NaN height (no up) keeps the person
+        return np.stack(
+            [spread_median > c.max_spread_mm, torso_length(joints) < c.min_torso_mm, height < c.min_height_mm]
+        )
+
+    def _usable(self, joints: np.ndarray, spread_median: np.ndarray, height: np.ndarray) -> np.ndarray:
+        """``(P,)`` the persons a track may take (no filter of :meth:`_refused` refuses them; step 1)."""
+        return ~self._refused(joints, spread_median, height).any(0)
 
     def _apart(self, new: np.ndarray, joints: np.ndarray, spread_median: np.ndarray) -> np.ndarray:
         """The persons ``new (N,)`` (indices into the frame's ``joints``) that may start tracks when no two of them

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from pipeline.track import Tracker, bone_lengths, mean_joint_distance, skeleton_height, torso_length
+from pipeline.track import Tracker, bone_lengths, mean_joint_distance
 from posenet.skeleton import BONES, NUM_JOINTS
 
 MM_PER_CM = 10.0
@@ -376,7 +376,7 @@ def breakdown(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GA
         own = dict(
             gated_pairs(gt, {p.detection: TrackedPerson(p.detection, p.raw, p.raw) for p in out}, gate_mm)
         )
-        spread_median = np.median(fr.spread, axis=1) if len(out) else np.zeros(0)
+        refused = tracker._refused(fr.joints, *tracker._measures(fr.joints, fr.spread, fr.up))  # (3, P)
         taken = [p for p in out if p.track_id is not None or p.tentative or p.parked]
         for g in range(len(gt)):
             if g in matched:
@@ -387,14 +387,9 @@ def breakdown(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GA
                 continue
             p = persons[own[g]]
             unsure = fr.unsure is not None and bool(fr.unsure[p.detection])
-            height = np.nan if fr.up is None else float(skeleton_height(p.raw, fr.up))
             neighbours = [q.joints for q in taken if q.detection != p.detection]
-            if spread_median[p.detection] > c.max_spread_mm:
-                reason = MISSED[2]
-            elif torso_length(p.raw[None])[0] < c.min_torso_mm:
-                reason = MISSED[3]
-            elif height < c.min_height_mm:
-                reason = MISSED[4]
+            if refused[:, p.detection].any():  # the first filter that refuses it: spread, torso, height
+                reason = MISSED[2 + int(np.argmax(refused[:, p.detection]))]
             elif p.tentative:
                 reason = MISSED[5]
             elif p.parked:

@@ -178,6 +178,17 @@ def resize_view(
     return color, depth, Camera(K, camera.extrinsics, camera.distortion, new), (sx, sy)
 
 
+def _input_views(views: Sequence[SceneView], config: InputConfig) -> list[SceneView]:
+    """``views`` as :class:`posenet.scene.SceneView` s (``(color, depth, camera)`` tuples too), checked: at least one,
+    and colour in each where the config's modality reads it."""
+    if not views:
+        raise ValueError("a scene needs at least one view")
+    views = scene_views(views)
+    if config.modality != "depth" and any(v.color is None for v in views):
+        raise ValueError(f"modality {config.modality!r} needs colour images, but a view has none")
+    return views
+
+
 def _at_read_size(
     views: Sequence[SceneView], config: InputConfig
 ) -> tuple[Sequence[SceneView], Tensor | None]:
@@ -299,14 +310,10 @@ def build_box_crops(
     pair without a box (``posenet.net.box_poses.box_heatmaps``: 17 boxes of 3 views make 17 crops, not 8 x 3)."""
     if config.mode != "crop":
         raise ValueError("build_box_crops is for crop mode; use build_scene in full mode")
-    if not views:
-        raise ValueError("a scene needs at least one view")
-    views = scene_views(views)
+    views = _input_views(views, config)
     V = len(views)
     if len(boxes) != V:
         raise ValueError(f"got {len(boxes)} box lists for {V} views")
-    if config.modality != "depth" and any(v.color is None for v in views):
-        raise ValueError(f"modality {config.modality!r} needs colour images, but a view has none")
     per_view = [torch.as_tensor(np.asarray(b, np.float32).reshape(-1, 4)) for b in boxes]
     counts = [len(b) for b in per_view]
     view = torch.repeat_interleave(torch.arange(V), torch.tensor(counts, dtype=torch.long))  # (N,)
@@ -368,9 +375,7 @@ def build_scene(
         augment: None at test time; else the random augmentation to draw (per person and view).
         mirror: flip every network image horizontally (test-time flip averaging; undone like any flip).
     """
-    if not views:
-        raise ValueError("a scene needs at least one view")
-    views = scene_views(views)  # (color, depth, camera) tuples too
+    views = _input_views(views, config)
     V = len(views)
     boxes = torch.as_tensor(boxes, dtype=torch.float32)
     has_box = torch.as_tensor(has_box, dtype=torch.bool)
@@ -379,8 +384,6 @@ def build_scene(
             f"boxes must be (P, {V}, 4) and has_box (P, {V}), "
             f"got {tuple(boxes.shape)}, {tuple(has_box.shape)}"
         )
-    if config.modality != "depth" and any(v.color is None for v in views):
-        raise ValueError(f"modality {config.modality!r} needs colour images, but a view has none")
     views, factors = _at_read_size(views, config)
     if factors is not None:
         boxes = rescale_pixels(boxes, factors.view(1, V, 4))
