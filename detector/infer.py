@@ -203,6 +203,10 @@ class PersonDetector:
     def needs_depth(self) -> bool:
         return self.cfg.input_mode in ("depth", "rgbd")
 
+    @property
+    def needs_color(self) -> bool:
+        return self.cfg.input_mode in ("rgb", "rgbd")
+
     def detect(
         self,
         images: Sequence[np.ndarray | None],

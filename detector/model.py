@@ -290,6 +290,45 @@ def build_detector(cfg: DetectorConfig) -> DetrForObjectDetection:
     return model
 
 
+def with_input_mode(
+    model: nn.Module, cfg: DetectorConfig, input_mode: str
+) -> tuple[nn.Module, DetectorConfig]:
+    """``model`` (of ``cfg``) made to read ``input_mode`` instead: a model of the same architecture whose weights are
+    ``model``'s, except that the first convolution keeps only the weights of the channels both inputs share (colour
+    for rgbd -> rgb, depth for rgbd -> depth; channels are laid out colour first, then depth: ``detector.inputs``).
+    A starting point for fine-tuning to the new input (``detector.train --init CKPT --input MODE``): the dropped
+    channels' contribution is gone, so it needs training before use. The same mode returns ``model`` and ``cfg``."""
+    if input_mode == cfg.input_mode:
+        return model, cfg
+    old, new = cfg.input_mode, input_mode
+    keep = {"rgb": [0, 1, 2], "depth": [3]} if old == "rgbd" else None
+    if keep is None or new not in keep:
+        raise ValueError(
+            f"a detector reading {old!r} cannot be turned into one reading {new!r}: only rgbd -> rgb or depth "
+            "keeps weights for every channel it reads; train from a preset instead"
+        )
+    new_cfg = replace(cfg, input_mode=new, pretrained=None)
+    converted = from_detr_config(detr_config(new_cfg), new_cfg)
+    state = model.state_dict()
+    target = converted.state_dict()
+    sliced = 0
+    for name, value in state.items():
+        want = target[name].shape
+        if value.shape != want:
+            if (
+                value.ndim != 4
+                or value.shape[1] != INPUT_CHANNELS[old]
+                or value.shape[:1] + value.shape[2:] != (want[:1] + want[2:])
+            ):
+                raise ValueError(f"{name}: {tuple(value.shape)} cannot become {tuple(want)}")
+            state[name] = value[:, keep[new]].clone()
+            sliced += 1
+    if sliced != 1:
+        raise ValueError(f"expected one first convolution to reduce, found {sliced}")
+    converted.load_state_dict(state)
+    return converted.train(model.training), new_cfg
+
+
 def param_groups(model: nn.Module, lr: float, backbone_lr: float, weight_decay: float) -> list[dict]:
     """AdamW groups: the backbone at ``backbone_lr``, the rest at ``lr`` (DETR's recipe); norms get no
     decay."""

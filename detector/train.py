@@ -34,7 +34,7 @@ from detector.data import DetectionDataset, collate, load_records, worker_init
 from detector.dense import DenseLoss
 from detector.evaluate import coco_ap
 from detector.infer import PersonDetector
-from detector.model import ARCHS, DetectorConfig, build_detector, param_groups, preset
+from detector.model import ARCHS, DetectorConfig, build_detector, param_groups, preset, with_input_mode
 from detector.predict import predict_records
 from posenet.cli import (
     add_annotations,
@@ -268,7 +268,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--input",
         choices=["rgb", "depth", "rgbd"],
-        help="input channels (default: the preset's; cpu: rgbd, paper: rgb as in the paper)",
+        help="input channels (default: the preset's; cpu: rgbd, paper: rgb as in the paper). With --init: fine-tune "
+        "the checkpoint to read these instead (rgbd -> depth: a detector that never sees colour; its first "
+        "convolution keeps the depth channel's weights)",
     )
     g.add_argument(
         "--arch",
@@ -366,12 +368,16 @@ def main(argv: list[str] | None = None) -> list[dict]:
         trained_on = saved_trained_on(meta)
         det_cfg.extra.pop("trained_on", None)  # (where runs from before the shared layout kept it)
     elif args.init:
-        if args.pretrained or args.arch or args.backbone or args.queries or args.input or args.backbone_stage:
+        if args.pretrained or args.arch or args.backbone or args.queries or args.backbone_stage:
             raise ValueError(
-                "--init takes the architecture and input of its checkpoint; drop --pretrained, --arch, "
-                "--backbone, --backbone-stage, --queries and --input"
+                "--init takes the architecture of its checkpoint; drop --pretrained, --arch, "
+                "--backbone, --backbone-stage and --queries"
             )
         model, det_cfg, meta = load_checkpoint(args.init)
+        if (
+            args.input
+        ):  # e.g. an rgbd checkpoint fine-tuned to read depth alone (its first convolution reduced)
+            model, det_cfg = with_input_mode(model, det_cfg, args.input)
         # the networks are resolution-free (sine position codes): --input-width fine-tunes at another width
         if args.input_width:
             det_cfg = replace(det_cfg, input_width=args.input_width)

@@ -242,6 +242,18 @@ class ScenePipeline:
         modality = self.pose.model.config.inputs.modality
         return {"rgbd": ("color", "depth"), "rgb": ("color",), "depth": ("depth",)}[modality]
 
+    @property
+    def detector_modalities(self) -> tuple[str, ...]:
+        """The images the detector reads (empty without a detector): a frame in detector mode needs these and the
+        pose network's (:attr:`modalities`); with a depth-only detector and pose network, depth alone."""
+        if self.detector is None:
+            return ()
+        return tuple(
+            m
+            for m, needed in (("color", self.detector.needs_color), ("depth", self.detector.needs_depth))
+            if needed
+        )
+
     @classmethod
     def from_checkpoints(
         cls,

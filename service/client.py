@@ -76,7 +76,11 @@ class ClientConfig:
 
 
 # ----------------------------------------------------------------------------------------------- requests
-COLOR_FORMATS = ("png", "jpeg")  # as on disk; JPEG re-encoded at --jpeg-quality
+COLOR_FORMATS = (
+    "png",
+    "jpeg",
+    "none",
+)  # as on disk; JPEG re-encoded at --jpeg-quality; not sent (depth only)
 DEPTH_FORMATS = ("png", "png-fast")  # as on disk; lossless PNG without filter at zlib level 3
 
 
@@ -95,8 +99,10 @@ class Transport:
         if not 1 <= self.quality <= 100:
             raise ValueError(f"the JPEG quality must be 1 to 100, got {self.quality}")
 
-    def color_part(self, name: str, data: bytes) -> tuple[str, bytes, str]:
-        """A colour image's file part (``name``: its file name, ``data``: its bytes as read)."""
+    def color_part(self, name: str, data: bytes) -> tuple[str, bytes, str] | None:
+        """A colour image's file part (``name``: its file name, ``data``: its bytes as read); None with ``none``."""
+        if self.color == "none":
+            return None
         if self.color == "png":
             return name, data, "image/png"
         bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
@@ -136,7 +142,8 @@ def scene_request(
         views.append(entry)
         color = root / view.file_name
         depth = root / depth_file_name(view.file_name)
-        files.append((f"color_{i}", transport.color_part(color.name, color.read_bytes())))
+        if transport.color != "none":  # a depth-only server: no colour leaves the client
+            files.append((f"color_{i}", transport.color_part(color.name, color.read_bytes())))
         files.append((f"depth_{i}", transport.depth_part(depth.name, depth.read_bytes())))
     scene = {"views": views}
     if sample.up is not None:  # the file knows the room: streams leave lying persons untracked
@@ -508,7 +515,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--color-format", choices=COLOR_FORMATS, default="png",
-        help="send colour as on disk (png) or re-encoded as JPEG (an eighth of a rendered PNG's bytes; default: %(default)s)",
+        help="send colour as on disk (png), re-encoded as JPEG (an eighth of a rendered PNG's bytes), or not at all "
+        "(none: depth only, for a server whose networks read depth alone, GET /model's modalities and "
+        "detector_modalities; default: %(default)s)",
     )  # fmt: skip
     parser.add_argument(
         "--jpeg-quality", type=int, default=95, help="JPEG quality, 1-100, with --color-format jpeg (default: %(default)s)"

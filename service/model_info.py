@@ -53,6 +53,7 @@ def model_info(pipeline: ScenePipeline, device: str) -> ModelInfo:
     return ModelInfo(
         joints=list(JOINTS),
         modalities=list(pipeline.modalities),
+        detector_modalities=list(pipeline.detector_modalities),
         input_size=inputs.network_size(False),
         pose_trained_on=summarise_training(pipeline.pose.config),
         detector_trained_on=None if pipeline.detector is None else summarise_training(pipeline.detector_meta),

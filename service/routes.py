@@ -348,9 +348,10 @@ async def decoded(
         settings.max_views, settings.max_image_pixels, settings.max_boxes_per_view, pipeline.read_size
     )
     need_color = "color" in pipeline.modalities
+    detector_color = "color" in pipeline.detector_modalities or pipeline.detector is None
 
     def decode():
-        return validate_scene(parse_scene(scene_text, limits), files, limits, need_color)
+        return validate_scene(parse_scene(scene_text, limits), files, limits, need_color, detector_color)
 
     scene = await anyio.to_thread.run_sync(decode)
     decode_ms = (time.perf_counter() - t_start) * 1e3

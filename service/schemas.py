@@ -292,6 +292,11 @@ class ModelInfo(BaseModel):
     modalities: list[str] = Field(
         ..., description="the image modalities the pose network reads (color, depth)"
     )
+    detector_modalities: list[str] = Field(
+        default_factory=list,
+        description="the image modalities the detector reads (empty without a detector): a frame sent without boxes "
+        "needs these as well as the pose network's",
+    )
     input_size: Size | None = Field(
         None, description="(width, height) the pose network works at, pixels (images are resized to it)"
     )

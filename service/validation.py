@@ -187,12 +187,12 @@ def _reduction(files: Mapping[str, bytes], i: int, limits: Limits) -> int:
 
 
 def validate_scene(
-    scene: SceneIn, files: Mapping[str, bytes], limits: Limits, need_color: bool
+    scene: SceneIn, files: Mapping[str, bytes], limits: Limits, need_color: bool, detector_color: bool = True
 ) -> ValidatedScene:
     """Decode and check every view of ``scene`` with its file parts ``color_<i>`` / ``depth_<i>``.
 
-    ``need_color``: whether colour images are required (the pose network reads colour, or detection is
-    needed).
+    ``need_color``: whether colour images are required (the pose network reads colour). ``detector_color``:
+    whether a frame without boxes (detector mode) needs them too (the detector reads colour).
     """
     expected = {f"{kind}_{i}" for i in range(len(scene.views)) for kind in ("color", "depth")}
     unexpected = sorted(set(files) - expected)
@@ -209,11 +209,18 @@ def validate_scene(
         )
     if not reference_mode and any(v.person_ids is not None for v in scene.views):
         raise InputError("person_ids were given without boxes")
-    need_color = need_color or not reference_mode  # the detector reads colour
+    # why a view without colour is refused (None: colour is optional)
+    color_reason = (
+        "the pose network reads colour"
+        if need_color
+        else "detection needs colour"
+        if not reference_mode and detector_color
+        else None
+    )
     reduced = [_reduction(files, i, limits) for i in range(len(scene.views))]
     decoded = _decode_all(scene, files, limits, reduced)
     try:
-        return _validated(scene, files, limits, need_color, reference_mode, decoded, reduced)
+        return _validated(scene, files, limits, color_reason, reference_mode, decoded, reduced)
     finally:
         for job in decoded.values():
             job.cancel()  # after an error: drop what has not started
@@ -223,7 +230,7 @@ def _validated(
     scene: SceneIn,
     files: Mapping[str, bytes],
     limits: Limits,
-    need_color: bool,
+    color_reason: str | None,
     reference_mode: bool,
     decoded: dict[str, Future],
     reduced: list[int],
@@ -244,9 +251,8 @@ def _validated(
                     f"color_{i} is {color.shape[1] * k}x{color.shape[0] * k} but depth_{i} is {width}x{height}: "
                     "the colour and depth of a view must be registered at the same size"
                 )
-        elif need_color:
-            why = "detection needs colour" if not reference_mode else "the pose network reads colour"
-            raise InputError(f"missing file part color_{i} ({why}); send a PNG or JPEG colour image")
+        elif color_reason is not None:
+            raise InputError(f"missing file part color_{i} ({color_reason}); send a PNG or JPEG colour image")
         camera = _camera(view, i, width, height)
         views.append(SceneView(color, depth, camera if k == 1 else camera.scale(1 / k)))
         boxes, ids = _boxes(view, i, width, height, limits)

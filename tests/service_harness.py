@@ -24,17 +24,21 @@ import torch
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
-def tiny_checkpoints(folder: Path, seed: int = 0, detector: bool = True) -> tuple[Path, Path | None]:
-    """A random-init pose network and (if ``detector``) a small random-init DETR, saved under ``folder``.
+def tiny_checkpoints(
+    folder: Path, seed: int = 0, detector: bool = True, depth_only: bool = False
+) -> tuple[Path, Path | None]:
+    """A random-init pose network and (if ``detector``) a small random-init DETR, saved under ``folder``; with
+    ``depth_only`` both read depth alone (the colourless path: no colour image is needed).
 
     Returns the (pose, detector or None) checkpoint paths."""
     from detector.checkpoint import save_checkpoint as save_detector
     from detector.model import build_detector, preset
     from posenet.net.checkpoint import save_checkpoint as save_pose
+    from posenet.net.inputs import InputConfig
     from posenet.net.model import ModelConfig, PoseNet
 
     torch.manual_seed(seed)
-    pose_cfg = ModelConfig()
+    pose_cfg = ModelConfig(inputs=InputConfig(modality="depth")) if depth_only else ModelConfig()
     pose = save_pose(
         folder / "pose", PoseNet(pose_cfg), {"model": dataclasses.asdict(pose_cfg), "data": "random"}
     )
@@ -45,7 +49,7 @@ def tiny_checkpoints(folder: Path, seed: int = 0, detector: bool = True) -> tupl
     det_cfg = preset(
         "cpu",
         arch="detr",
-        input_mode="rgb",
+        input_mode="depth" if depth_only else "rgb",
         backbone_stage=3,
         d_model=32,
         encoder_layers=1,

@@ -68,9 +68,16 @@ class InputConfig:
 
     @property
     def in_channels(self) -> int:
-        colour = 3 if self.modality in ("rgb", "rgbd") else 0
-        depth = (1 + 2 * self.extra_depth) if self.modality in ("depth", "rgbd") else 0
-        return colour + depth + 1  # + box mask
+        return len(self.channels)
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """The network input's channels in order (:func:`_network_channels` writes them so)."""
+        colour = ("red", "green", "blue") if self.modality in ("rgb", "rgbd") else ()
+        depth = ()
+        if self.modality in ("depth", "rgbd"):
+            depth = ("depth", "relative_depth", "depth_valid") if self.extra_depth else ("depth",)
+        return (*colour, *depth, "box_mask")
 
     def network_size(self, training: bool) -> tuple[int, int]:
         """(W, H) of the network's input."""

@@ -259,6 +259,7 @@ def load_init_weights(model: PoseNet, path: str) -> None:
         "or a larger one"
     )
     state = load_file(weights, device="cpu")
+    state = _kept_input_channels(state, config, model, path)
     small = _narrower_unet(config, model)
     if small is not None:  # --base above the checkpoint's: widen it, computing what it computed
         state = widen_state_dict(state, small, model.unet, prefix="unet.")
@@ -277,6 +278,36 @@ def load_init_weights(model: PoseNet, path: str) -> None:
         raise ValueError(
             f"--init {path} does not fit this run's model (missing {missing[:3]}, unexpected {unexpected[:3]}): {fix}"
         )
+
+
+def _kept_input_channels(state: dict, config_file: Path, model: PoseNet, path: str) -> dict:
+    """``state`` for ``model`` when the checkpoint reads more input channels than it (e.g. rgbd weights fine-tuned
+    to read depth alone, ``--modality depth``): the first convolution keeps the weights of the channels both read
+    (``InputConfig.channels``), every other tensor is unchanged. ``state`` itself when the inputs agree."""
+    if not config_file.is_file():
+        return state
+    saved = json.loads(config_file.read_text()).get("model")
+    try:
+        old = ModelConfig.from_dict(saved).inputs.channels
+    except (TypeError, ValueError, AttributeError):
+        return state
+    new = model.config.inputs.channels
+    if old == new:
+        return state
+    if not set(new) <= set(old):
+        return state  # load_state_dict reports the mismatch
+    keep = [old.index(c) for c in new]
+    first = [k for k, v in state.items() if v.ndim == 4 and v.shape[1] == len(old)]
+    if len(first) != 1:
+        return state
+    state = dict(state)
+    state[first[0]] = state[first[0]][:, keep].clone()
+    print(
+        f"--init {path} reads {', '.join(old)}; this run reads {', '.join(new)}: its first convolution keeps "
+        "the weights of those channels",
+        file=sys.stderr,
+    )
+    return state
 
 
 def _narrower_unet(config_file: Path, model: PoseNet) -> UNetConfig | None:

@@ -18,7 +18,7 @@ from detector import train as train_cli  # noqa: E402
 from detector.data import DetectionDataset, collate, load_records  # noqa: E402
 from detector.evaluate import coco_ap, evaluate_file  # noqa: E402
 from detector.infer import PersonDetector  # noqa: E402
-from detector.model import build_detector, preset  # noqa: E402
+from detector.model import build_detector, preset, with_input_mode  # noqa: E402
 from posenet.boxes import xyxy_to_coco  # noqa: E402
 
 W, H = 128, 96
@@ -188,6 +188,34 @@ def test_cli_checkpoint_gives_identical_predictions(dataset, tmp_path):
     assert PersonDetector.from_checkpoint(wider).cfg.input_width == W + 32
     with pytest.raises(ValueError, match="--init takes the architecture"):
         train_cli.main([*common, "--queries", "8", "--out", str(tmp_path / "refused")])
+
+    # --init with --input depth: the colour + depth detector fine-tuned to read depth alone, then run without colour.
+    depth_run = tmp_path / "depth"
+    train_cli.main([*common, "--input", "depth", "--out", str(depth_run)])
+    depth_only = PersonDetector.from_checkpoint(depth_run)
+    assert depth_only.cfg.input_mode == "depth" and not depth_only.needs_color
+    assert depth_only.detect([None] * len(depths), depths, score_threshold=0.0)[0].boxes.shape[1] == 4
+
+
+def test_input_mode_conversion_keeps_the_shared_channels():
+    """rgbd -> depth keeps every weight but the first convolution's colour part: on inputs whose colour channels
+    are 0 the two models agree exactly; conversions that would invent weights are refused."""
+    cfg = tiny_cpu_cfg(input_mode="rgbd")
+    torch.manual_seed(0)
+    model = build_detector(cfg).eval()
+    for mode, keep in (("depth", [3]), ("rgb", [0, 1, 2])):
+        converted, new_cfg = with_input_mode(model, cfg, mode)
+        assert new_cfg.input_mode == mode and not converted.training
+        x = torch.randn(2, 4, 64, 96)
+        x[:, [c for c in range(4) if c not in keep]] = 0
+        with torch.no_grad():
+            a, b = model(pixel_values=x), converted(pixel_values=x[:, keep])
+        torch.testing.assert_close(a.logits, b.logits, rtol=0, atol=1e-5)
+        torch.testing.assert_close(a.pred_boxes, b.pred_boxes, rtol=0, atol=1e-5)
+    assert with_input_mode(model, cfg, "rgbd")[0] is model
+    depth_model, depth_cfg = with_input_mode(model, cfg, "depth")
+    with pytest.raises(ValueError, match="cannot be turned into"):
+        with_input_mode(depth_model, depth_cfg, "rgbd")
 
 
 def test_pretrained_folder_gets_a_person_head(tmp_path):

@@ -205,3 +205,23 @@ def test_cli_init_starts_from_given_weights(tiny, tmp_path):
     for training in (False, True):
         model.train(training), wide.train(training)
         torch.testing.assert_close(wide.unet(x), model.unet(x), rtol=0, atol=1e-5)
+    # --modality depth from rgbd weights: the first convolution keeps the depth channels' weights, so on inputs
+    # without colour (its channels 0) both compute the same logits; a modality the weights never read is refused
+    rgbd = PoseNet(
+        ModelConfig(inputs=InputConfig(crop_size=32), base=8)
+    )  # (model's norms moved in training mode)
+    depth = PoseNet(ModelConfig(inputs=InputConfig(crop_size=32, modality="depth"), base=8))
+    load_init_weights(rgbd, str(first / "last"))
+    load_init_weights(depth, str(first / "last"))
+    keep = [rgbd.config.inputs.channels.index(c) for c in depth.config.inputs.channels]
+    assert keep == [3, 4, 5, 6]
+    x[:, :3] = 0
+    rgbd.eval(), depth.eval()
+    torch.testing.assert_close(depth.unet(x[:, keep]), rgbd.unet(x), rtol=0, atol=1e-5)
+    from dataclasses import asdict
+
+    from posenet.net.checkpoint import save_checkpoint
+
+    saved_depth = save_checkpoint(tmp_path / "depth_ckpt", depth, {"model": asdict(depth.config)})
+    with pytest.raises(ValueError, match="does not fit"):  # depth weights cannot start an rgbd run
+        load_init_weights(rgbd, str(saved_depth))

@@ -52,8 +52,10 @@ def parts(n: int, **replace: bytes) -> dict[str, bytes]:
     return {k: v for k, v in files.items() if v is not None}
 
 
-def validate(views: list[dict], files: dict[str, bytes], need_color: bool = True):
-    return validate_scene(parse_scene(scene_json(views), LIMITS), files, LIMITS, need_color)
+def validate(
+    views: list[dict], files: dict[str, bytes], need_color: bool = True, detector_color: bool = True
+):
+    return validate_scene(parse_scene(scene_json(views), LIMITS), files, LIMITS, need_color, detector_color)
 
 
 # ----------------------------------------------------------------------------------------------- decoding
@@ -182,11 +184,18 @@ def test_malformed_scene_json(text):
         parse_scene(text, LIMITS)
 
 
-def test_colour_optional_only_for_depth_models_with_boxes():
+def test_colour_optional_only_where_no_network_reads_it():
     views = [{"camera": camera(), "boxes": [[1, 1, 20, 20]]}]
     assert validate(views, parts(1, color_0=None), need_color=False).views[0].color is None
     with pytest.raises(InputError, match="detection needs colour"):
         validate([{"camera": camera()}], parts(1, color_0=None), need_color=False)
+    # a depth-only detector and pose network: a frame without boxes needs no colour either
+    depth_only = {k: v for k, v in parts(1).items() if k.startswith("depth")}
+    got = validate([{"camera": camera()}], depth_only, need_color=False, detector_color=False)
+    assert got.views[0].color is None and got.boxes is None
+    # a depth-only detector before a pose network that reads colour: the message names the pose network
+    with pytest.raises(InputError, match="pose network reads colour"):
+        validate([{"camera": camera()}], parts(1, color_0=None), need_color=True, detector_color=False)
 
 
 def test_a_non_finite_estimate_is_never_sent_as_null():
