@@ -75,6 +75,15 @@ KNOWN_COST = {
     "detector-c6b90ae9889618b1640b": Cost(
         0.0, -0.001, "benchmarks/RESULTS.md 2026-12-06, day 4 twin, alt and alt-mesh"
     ),
+    # The depth-only pair (posenet/weights/depth, detector/weights/depth; 2026-12-07), the same scenes: day 4 twin
+    # 5.276 -> 5.320 cm, alt 7.421 -> 7.517, alt-mesh 6.718 -> 6.767; AP50 0.948 -> 0.947, 0.912 -> 0.916, 0.914 ->
+    # 0.916 (benchmarks/RESULTS.md, "Depth only against colour + depth").
+    "unet-44c61e0ce84329b26e11": Cost(
+        0.096, 0.0, "benchmarks/RESULTS.md 2026-12-07, depth-only weights, day 4 twin, alt and alt-mesh"
+    ),
+    "detector-c913caa690b03d7b5442": Cost(
+        0.0, -0.001, "benchmarks/RESULTS.md 2026-12-07, depth-only weights, day 4 twin, alt and alt-mesh"
+    ),
 }
 
 

@@ -85,10 +85,19 @@ def test_a_failed_int8_build_keeps_the_float_graph(graph, monkeypatch):
 def test_the_shipped_weights_have_their_int8_cost_on_record(tmp_path):
     """A new shipped checkpoint has a graph of its own: without a row in KNOWN_COST, ``auto`` silently stops taking
     int8 for it on every machine. Measure its cost (benchmarks/backend_accuracy.py) and add the row."""
+    from detector.infer import DEFAULT_WEIGHTS as DETECTOR_WEIGHTS
     from detector.infer import PersonDetector
+    from posenet.net.checkpoint import DEFAULT_WEIGHTS as POSE_WEIGHTS
     from posenet.net.infer import PoseEstimator
 
-    for network in (PoseEstimator.from_checkpoint(), PersonDetector.from_checkpoint()):
+    depth_pose, depth_detector = (w.with_name("depth.safetensors") for w in (POSE_WEIGHTS, DETECTOR_WEIGHTS))
+    networks = [
+        PoseEstimator.from_checkpoint(),
+        PersonDetector.from_checkpoint(),
+        PoseEstimator.from_checkpoint(depth_pose),  # the depth-only pair
+        PersonDetector.from_checkpoint(depth_detector),
+    ]
+    for network in networks:
         stem = network.export(tmp_path).stem
         assert stem in auto_int8.KNOWN_COST, f"{stem}: the shipped weights' int8 cost is not on record"
         assert auto_int8.KNOWN_COST[stem].small

@@ -57,3 +57,30 @@ def test_example_frame_skeleton_is_near_the_truth():
             assert errors and min(errors) < MAX_MPJPE_MM, (
                 f"detector mode: best MPJPE {min(errors or [np.inf]):.0f} mm"
             )
+
+
+DEPTH_POSE = POSE_WEIGHTS.with_name("depth.safetensors")
+DEPTH_DETECTOR = DETECTOR_WEIGHTS.with_name("depth.safetensors")
+
+
+@pytest.mark.skipif(
+    not (DEPTH_POSE.is_file() and DEPTH_DETECTOR.is_file()), reason="no shipped depth-only weights yet"
+)
+def test_depth_only_weights_answer_the_example_frame_without_colour():
+    """The shipped colourless pair: the example frame sent without any colour part, in detector mode and with
+    reference boxes, gives the annotated person's skeleton near its truth."""
+    truth = json.loads((FRAME / "truth.json").read_text())
+    gt = dict(zip(truth["person_ids"], np.asarray(truth["joints_mm"]), strict=True))
+    env = {"ORPOSE_POSE_CHECKPOINT": str(DEPTH_POSE), "ORPOSE_DETECTOR_CHECKPOINT": str(DEPTH_DETECTOR)}
+    with Server(env) as url, httpx.Client(base_url=url, timeout=120) as client:
+        info = client.get("/model").json()
+        assert info["modalities"] == info["detector_modalities"] == ["depth"]
+        for scene_file in ("scene_boxes.json", "scene.json"):
+            files = [(f"depth_{v}", (FRAME / f"depth_{v}.png").read_bytes()) for v in range(3)]
+            r = client.post("/scenes", data={"scene": (FRAME / scene_file).read_text()}, files=files)
+            assert r.status_code == 200, r.text
+            errors = [np.linalg.norm(np.array([j["position"] for j in p["joints"]]) - gt[0], axis=1).mean()
+                      for p in r.json()["persons"]]  # fmt: skip
+            assert errors and min(errors) < MAX_MPJPE_MM, (
+                f"{scene_file}: best MPJPE {min(errors or [np.inf]):.0f} mm"
+            )
