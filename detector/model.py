@@ -38,6 +38,8 @@ from transformers import (
     RTDetrForObjectDetection,
 )
 
+from posenet.net.checkpoint_files import keep_input_channels
+
 INPUT_CHANNELS = {"rgb": 3, "depth": 1, "rgbd": 4}
 # The transformers classes of each ``arch`` (the key is also the config's ``model_type``): DETR (the paper's) and Conditional DETR (Meng et al. 2021: the
 # same backbone, encoder and set loss, but queries that predict a reference point and a focal class loss; it
@@ -309,23 +311,8 @@ def with_input_mode(
         )
     new_cfg = replace(cfg, input_mode=new, pretrained=None)
     converted = from_detr_config(detr_config(new_cfg), new_cfg)
-    state = model.state_dict()
-    target = converted.state_dict()
-    sliced = 0
-    for name, value in state.items():
-        want = target[name].shape
-        if value.shape != want:
-            if (
-                value.ndim != 4
-                or value.shape[1] != INPUT_CHANNELS[old]
-                or value.shape[:1] + value.shape[2:] != (want[:1] + want[2:])
-            ):
-                raise ValueError(f"{name}: {tuple(value.shape)} cannot become {tuple(want)}")
-            state[name] = value[:, keep[new]].clone()
-            sliced += 1
-    if sliced != 1:
-        raise ValueError(f"expected one first convolution to reduce, found {sliced}")
-    converted.load_state_dict(state)
+    state, _ = keep_input_channels(model.state_dict(), INPUT_CHANNELS[old], keep[new])
+    converted.load_state_dict(state)  # every other tensor must fit as it is (strict)
     return converted.train(model.training), new_cfg
 
 

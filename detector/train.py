@@ -374,9 +374,7 @@ def main(argv: list[str] | None = None) -> list[dict]:
                 "--backbone, --backbone-stage and --queries"
             )
         model, det_cfg, meta = load_checkpoint(args.init)
-        if (
-            args.input
-        ):  # e.g. an rgbd checkpoint fine-tuned to read depth alone (its first convolution reduced)
+        if args.input:  # e.g. colour + depth weights fine-tuned to read depth alone
             model, det_cfg = with_input_mode(model, det_cfg, args.input)
         # the networks are resolution-free (sine position codes): --input-width fine-tunes at another width
         if args.input_width:

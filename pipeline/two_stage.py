@@ -250,7 +250,10 @@ class ScenePipeline:
             return ()
         return tuple(
             m
-            for m, needed in (("color", self.detector.needs_color), ("depth", self.detector.needs_depth))
+            for m, needed in (
+                ("color", getattr(self.detector, "needs_color", True)),  # optional in detector.protocol
+                ("depth", self.detector.needs_depth),
+            )
             if needed
         )
 

@@ -76,11 +76,8 @@ class ClientConfig:
 
 
 # ----------------------------------------------------------------------------------------------- requests
-COLOR_FORMATS = (
-    "png",
-    "jpeg",
-    "none",
-)  # as on disk; JPEG re-encoded at --jpeg-quality; not sent (depth only)
+# colour: as on disk; JPEG re-encoded at --jpeg-quality; not sent (a depth-only server)
+COLOR_FORMATS = ("png", "jpeg", "none")
 DEPTH_FORMATS = ("png", "png-fast")  # as on disk; lossless PNG without filter at zlib level 3
 
 

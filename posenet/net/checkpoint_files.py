@@ -97,3 +97,17 @@ def train_state_file(folder: str | Path) -> Path | None:
         if (Path(folder) / name).is_file():
             return Path(folder) / name
     return None
+
+
+def keep_input_channels(state: dict, in_channels: int, keep: list[int]) -> tuple[dict, str]:
+    """``state`` with the one 4-D weight that reads ``in_channels`` input channels (the network's first convolution)
+    reduced to the channels ``keep`` (their indices, in the new order), every other tensor shared: the weights of a
+    network that reads fewer inputs (colour + depth -> depth alone), which on inputs whose dropped channels are 0
+    computes what ``state`` computes. Returns the new dict and the reduced tensor's name; ValueError unless exactly
+    one tensor reads ``in_channels`` channels."""
+    first = [name for name, value in state.items() if value.ndim == 4 and value.shape[1] == in_channels]
+    if len(first) != 1:
+        raise ValueError(f"expected one first convolution reading {in_channels} channels, found {first}")
+    state = dict(state)
+    state[first[0]] = state[first[0]][:, keep].clone()
+    return state, first[0]

@@ -39,6 +39,7 @@ from posenet.boxes import person_ids
 from posenet.cli import add_annotations, add_config_options, add_data, add_threads, config_options
 from posenet.net.augment import AugmentConfig, detector_like_boxes
 from posenet.net.checkpoint import save_checkpoint, sectioned, training_config
+from posenet.net.checkpoint_files import keep_input_channels
 from posenet.net.inputs import InputConfig, build_scene, record_read_size
 from posenet.net.loss import mpjpe, reprojection_2d
 from posenet.net.model import ModelConfig, PoseNet
@@ -296,12 +297,10 @@ def _kept_input_channels(state: dict, config_file: Path, model: PoseNet, path: s
         return state
     if not set(new) <= set(old):
         return state  # load_state_dict reports the mismatch
-    keep = [old.index(c) for c in new]
-    first = [k for k, v in state.items() if v.ndim == 4 and v.shape[1] == len(old)]
-    if len(first) != 1:
-        return state
-    state = dict(state)
-    state[first[0]] = state[first[0]][:, keep].clone()
+    try:
+        state, _ = keep_input_channels(state, len(old), [old.index(c) for c in new])
+    except ValueError:
+        return state  # load_state_dict reports the mismatch
     print(
         f"--init {path} reads {', '.join(old)}; this run reads {', '.join(new)}: its first convolution keeps "
         "the weights of those channels",
