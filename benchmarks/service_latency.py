@@ -13,7 +13,8 @@ concurrency 1 and 4 (detector on, 3-person frame), and the server's peak RSS. ``
 
 ``--variants`` compares ways of running the same weights side by side in one run, one server each:
 ``default`` (the shipped settings: backend and precision ``auto``), ``default-jpeg`` (the same server, colour
-sent as JPEG q95 and depth as fast PNG), ``torch-bf16`` (torch with bf16 forced: what the shipped configs did
+sent as JPEG q95 and depth as fast PNG), ``default-read`` and ``default-read-jpeg`` (the views sent at the
+server's read size, ``service.client --send-size read``, colour as PNG or JPEG q95), ``torch-bf16`` (torch with bf16 forced: what the shipped configs did
 before precision became ``auto``),
 ``torch`` (precision ``auto``), ``onnxruntime`` and ``openvino``. Each variant's machine line comes from the
 server's ``/model``. To see an AVX2-only CPU on a newer one, cap torch's instruction sets (the runtimes are
@@ -59,9 +60,16 @@ VARIANTS = {  # name: the server's environment
     "openvino-fp32": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "fp32"},  # float forced (AVX2-only)
     "openvino-int8": {"ORPOSE_BACKEND": "openvino", "ORPOSE_PRECISION": "int8"},
     "default-jpeg": {},  # the default server; colour sent as JPEG q95 and depth as fast PNG
+    "default-read": {},  # the default server; views sent at its read size (PNG colour: the same answers)
+    "default-read-jpeg": {},  # the same, colour as JPEG q95
 }
-# Variants that send the images otherwise than --color-format / --depth-format say (service.client.Transport).
-TRANSPORTS = {"default-jpeg": ("jpeg", "png-fast")}
+# Variants that send the images otherwise than --color-format / --depth-format say (service.client.Transport;
+# "read": at GET /model's read_size, as `service.client --send-size read`).
+TRANSPORTS = {
+    "default-jpeg": ("jpeg", "png-fast", False),
+    "default-read": ("png", "png", True),
+    "default-read-jpeg": ("jpeg", "png", True),
+}
 
 
 def render_twin(folder: Path, annotations: Path, frames: int) -> Path:
@@ -207,7 +215,7 @@ def main(argv: list[str] | None = None) -> dict:
                 root,
                 frames,
                 args.requests,
-                *TRANSPORTS.get(variant, (args.color_format, args.depth_format)),
+                *TRANSPORTS.get(variant, (args.color_format, args.depth_format, False)),
             )
             print(format_variant(variant, results["variants"][variant]), flush=True)
     print(side_by_side(results["variants"]))
@@ -242,12 +250,13 @@ def run_variant(
     requests: int,
     color_format: str = "png",
     depth_format: str = "png",
+    at_read_size: bool = False,
 ) -> dict:
-    transport = Transport(color_format, depth_format)
-
     server = Server(env)
     with server as url, httpx.Client(base_url=url, timeout=300) as client:
         model = client.get("/model").json()
+        read_size = tuple(model["read_size"]) if at_read_size and model.get("read_size") else None
+        transport = Transport(color_format, depth_format, read_size=read_size)
         result = {"model": model, "configs": {}}
         for persons, index in frames.items():
             sample = ds[index]

@@ -16,12 +16,14 @@ turns), with the machine line from ``/model`` and the load average before and af
 Variants (one server each, side by side in one run): ``default`` (ORPOSE_* defaults, ``ORPOSE_THREADS=2``),
 ``threads1`` (one intra-op thread per stage: the front and the pose stage then each keep a core), ``int8``
 (``ORPOSE_PRECISION=int8``), ``jpeg`` (the default server, colour sent as JPEG q95 and depth as fast PNG,
-``service.client.Transport``), ``threads1-jpeg`` (both).
+``service.client.Transport``), ``threads1-jpeg`` (both), ``read`` and ``read-jpeg`` (the default server, each view
+sent at its read size, ``service.client --send-size read``, colour as PNG or JPEG q95).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import statistics
@@ -47,7 +49,10 @@ VARIANTS = {  # name: (the server's environment, the transport)
     "int8": ({"ORPOSE_PRECISION": "int8"}, Transport()),
     "jpeg": ({}, Transport("jpeg", "png-fast")),
     "threads1-jpeg": ({"ORPOSE_THREADS": "1"}, Transport("jpeg", "png-fast")),
+    "read": ({}, Transport()),  # at the read size (below)
+    "read-jpeg": ({}, Transport("jpeg")),
 }
+AT_READ_SIZE = {"read", "read-jpeg"}  # views sent at GET /model's read_size (service.client --send-size read)
 STAGES = ("decode", "detect", "match", "pose", "track", "wait")
 
 
@@ -126,9 +131,11 @@ def summarise(records: list[dict], span_s: float, fps: float) -> dict:
 def run_variant(name: str, root: Path, rates: list[float], seconds: float, frames: int, threads: int) -> dict:
     env, transport = VARIANTS[name]
     env = {"ORPOSE_THREADS": str(threads), "ORPOSE_MAX_IN_FLIGHT": "16", **env}
-    prepared = forms(root, frames, transport)
     with Server(env, startup_s=900) as url, httpx.Client(base_url=url, timeout=60) as client:
         model = client.get("/model").json()
+        if name in AT_READ_SIZE and model.get("read_size"):
+            transport = dataclasses.replace(transport, read_size=tuple(model["read_size"]))
+        prepared = forms(root, frames, transport)
         for k in range(3):  # warm-up: first calls compile kernels
             client.post(
                 "/streams/warm/frames", data={**prepared[k][0], "timestamp_s": str(k)}, files=prepared[k][1]

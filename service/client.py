@@ -17,7 +17,9 @@ Image files are sent as they are on disk (no decoding or re-encoding): ``dayD/ca
 default: 30 KB against 231 KB for a rendered 640x480 PNG, and the server decodes it at the models' resolution by DCT scaling), and
 ``--depth-format png-fast`` re-writes depth losslessly with no PNG filter and zlib level 3 (as the renderer
 writes it; faster to decode than a maximally compressed PNG): cheaper transport, at the accuracy cost that
-``docs/service.md`` records for JPEG (depth stays exact). With ``--reference-boxes`` the annotated boxes that have a person id are
+``docs/service.md`` records for JPEG (depth stays exact). ``--send-size read`` brings each view to the size the
+networks read (GET /model's ``read_size``) before sending it, as the server would: with PNG colour the same
+answers bit for bit, a quarter of the bytes, and a quarter of the pixels for the server to decode. With ``--reference-boxes`` the annotated boxes that have a person id are
 sent with those ids (the paper's reference-box setting, detection skipped). ``--evaluate`` scores the whole
 output file with ``posenet.evaluation.evaluate``; in detector mode each returned person is first given the ground-truth
 id whose boxes it overlaps most (mean IoU over the views, as in the paper; MVOR's box-only people compete).
@@ -54,10 +56,17 @@ from tqdm import tqdm
 
 from posenet.boxes import ground_truth_ids, identified
 from posenet.cli import add_days
-from posenet.data.images import DEPTH_PNG_PARAMS, depth_file_name
+from posenet.data.images import (
+    COLOR_PNG_PARAMS,
+    DEPTH_PNG_PARAMS,
+    depth_file_name,
+    subsample_color,
+    subsample_depth,
+)
 from posenet.data.mvor import MvorDataset, load_annotations
 from posenet.data.sample import Sample
 from posenet.evaluation.evaluate import prediction_record
+from posenet.net.inputs import reduction
 
 RETRY_STATUSES = {429, 502, 503, 504}
 
@@ -84,11 +93,18 @@ DEPTH_FORMATS = ("png", "png-fast")  # as on disk; lossless PNG without filter a
 @dataclass(frozen=True)
 class Transport:
     """How a frame's images travel: colour as on disk (``png``) or re-encoded as JPEG at ``quality``; depth as on
-    disk or re-written losslessly as ``posenet.data.images.DEPTH_PNG_PARAMS`` (``png-fast``)."""
+    disk or re-written losslessly as ``posenet.data.images.DEPTH_PNG_PARAMS`` (``png-fast``).
+
+    ``read_size`` (W, H), GET /model's: each view is brought to the size the networks read before it is sent,
+    by the server's own rule (``posenet.net.inputs.reduction``; block mean colour, lower median depth), and
+    re-encoded (colour PNG as ``COLOR_PNG_PARAMS`` or JPEG, depth as ``DEPTH_PNG_PARAMS``). The camera keeps
+    its calibrated intrinsics and ``image_size``, so the server reads the view as the calibrated image reduced:
+    with PNG colour the answers are the same bit for bit, with a quarter of the bytes to send and to decode."""
 
     color: str = "png"
     depth: str = "png"
     quality: int = 95
+    read_size: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         if self.color not in COLOR_FORMATS or self.depth not in DEPTH_FORMATS:
@@ -102,7 +118,11 @@ class Transport:
             return None
         if self.color == "png":
             return name, data, "image/png"
-        bgr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        return self._encoded_color(name, cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR))
+
+    def _encoded_color(self, name: str, bgr: np.ndarray) -> tuple[str, bytes, str]:
+        if self.color == "png":
+            return name, cv2.imencode(".png", bgr, COLOR_PNG_PARAMS)[1].tobytes(), "image/png"
         jpeg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, self.quality])[1].tobytes()
         return str(Path(name).with_suffix(".jpg")), jpeg, "image/jpeg"
 
@@ -112,6 +132,24 @@ class Transport:
             depth = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
             data = cv2.imencode(".png", depth, DEPTH_PNG_PARAMS)[1].tobytes()
         return name, data, "image/png"
+
+    def view_parts(self, color: Path, depth: Path) -> tuple[tuple | None, tuple, tuple[int, int] | None]:
+        """A view's colour part (None with ``none``) and depth part from its files, and the (W, H) of the images
+        as recorded when they were sent reduced (None: sent at that size)."""
+        depth_bytes = depth.read_bytes()
+        k, image = 1, None
+        if self.read_size is not None:
+            image = cv2.imdecode(np.frombuffer(depth_bytes, np.uint8), cv2.IMREAD_UNCHANGED)
+            k = 1 if image is None else reduction(image.shape[1], image.shape[0], self.read_size)
+        if k == 1:  # as recorded (a file the server cannot read goes as it is, for the server to say why)
+            color_part = None if self.color == "none" else self.color_part(color.name, color.read_bytes())
+            return color_part, self.depth_part(depth.name, depth_bytes), None
+        reduced = cv2.imencode(".png", subsample_depth(image, k), DEPTH_PNG_PARAMS)[1].tobytes()
+        color_part = None
+        if self.color != "none":
+            bgr = cv2.imread(str(color), cv2.IMREAD_COLOR)
+            color_part = self._encoded_color(color.name, subsample_color(bgr, k))
+        return color_part, (depth.name, reduced, "image/png"), (image.shape[1], image.shape[0])
 
 
 def scene_request(
@@ -138,10 +176,12 @@ def scene_request(
             entry["boxes"], entry["person_ids"] = boxes.tolist(), ids.tolist()
         views.append(entry)
         color = root / view.file_name
-        depth = root / depth_file_name(view.file_name)
-        if transport.color != "none":  # a depth-only server: no colour leaves the client
-            files.append((f"color_{i}", transport.color_part(color.name, color.read_bytes())))
-        files.append((f"depth_{i}", transport.depth_part(depth.name, depth.read_bytes())))
+        color_part, depth_part, recorded = transport.view_parts(color, root / depth_file_name(view.file_name))
+        if recorded is not None:  # sent reduced: the server reads it as the calibrated image brought to 1/k
+            entry["camera"]["image_size"] = list(recorded)
+        if color_part is not None:  # None: a depth-only server, no colour leaves the client
+            files.append((f"color_{i}", color_part))
+        files.append((f"depth_{i}", depth_part))
     scene = {"views": views}
     if sample.up is not None:  # the file knows the room: streams leave lying persons untracked
         scene["up"] = sample.up.tolist()
@@ -524,6 +564,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="send depth as on disk (png) or re-written losslessly without PNG filter at zlib level 3 (png-fast: "
         "faster for the server to decode; default: %(default)s)",
     )  # fmt: skip
+    parser.add_argument(
+        "--send-size", choices=("recorded", "read"), default="recorded",
+        help="send each view at its recorded size, or reduced to the size the networks read (read: GET /model's "
+        "read_size, by the server's own rule, with the calibrated camera; the same answers with PNG colour, a "
+        "quarter of the bytes, and less for the server to decode; default: %(default)s)",
+    )  # fmt: skip
     track = parser.add_argument_group("tracking (sequences rendered by posenet.synth --sequence)")
     track.add_argument(
         "--track",
@@ -552,12 +598,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def served_read_size(url: str, token: str | None) -> tuple[int, int] | None:
+    """GET /model's ``read_size`` (None: the server reads views as sent); exits with the reason when the server
+    cannot say."""
+    try:
+        r = httpx.get(f"{url.rstrip('/')}/model", headers=_headers(ClientConfig(token=token)), timeout=30)
+        r.raise_for_status()
+    except httpx.HTTPError as exc:
+        raise SystemExit(
+            f"--send-size read asks the server for its read size (GET {url}/model): {exc}"
+        ) from None
+    size = r.json().get("read_size")
+    if size is None:
+        print("--send-size read: the server reads views as sent (no read_size); sending them as recorded")
+        return None
+    return int(size[0]), int(size[1])
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.concurrency < 1:
         raise SystemExit("--concurrency must be at least 1")
+    read_size = served_read_size(args.url, args.token) if args.send_size == "read" else None
     try:
-        transport = Transport(args.color_format, args.depth_format, args.jpeg_quality)
+        transport = Transport(args.color_format, args.depth_format, args.jpeg_quality, read_size)
     except ValueError as exc:
         raise SystemExit(f"--jpeg-quality: {exc}") from None
     if args.annotations is None:  # a recording folder: frames and cameras only, nothing to evaluate against

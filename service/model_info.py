@@ -55,6 +55,7 @@ def model_info(pipeline: ScenePipeline, device: str) -> ModelInfo:
         modalities=list(pipeline.modalities),
         detector_modalities=list(pipeline.detector_modalities),
         input_size=inputs.network_size(False),
+        read_size=None if pipeline.read_size is None else list(pipeline.read_size),
         pose_trained_on=summarise_training(pipeline.pose.config),
         detector_trained_on=None if pipeline.detector is None else summarise_training(pipeline.detector_meta),
         detector_loaded=pipeline.detector is not None,

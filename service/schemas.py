@@ -300,6 +300,13 @@ class ModelInfo(BaseModel):
     input_size: Size | None = Field(
         None, description="(width, height) the pose network works at, pixels (images are resized to it)"
     )
+    read_size: Size | None = Field(
+        None,
+        description="(width, height) of the views the networks read in full, pixels: a view sent larger is decoded "
+        "smaller when it is an exact 2, 4 or 8 times this, so sending it at this size (with its camera's "
+        "image_size the calibrated one, an exact 2, 4 or 8 times larger) gives the same answers with a quarter or "
+        "less of the bytes and the decoding (service.client --send-size read). Null: views are read as sent",
+    )
     pose_trained_on: str = Field(..., description="what the pose network's weights were trained on")
     detector_trained_on: str | None = Field(None, description="what the detector's weights were trained on")
     detector_loaded: bool = Field(..., description="whether detector mode is available")

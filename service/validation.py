@@ -48,8 +48,10 @@ class ValidatedScene:
         person_ids: per view (K_v,) int64 client identities of the boxes, or None (match across views).
         sent_boxes: per view (K_v, 4) float64 boxes as the client sent them (``boxes`` is clipped to the
             image), or None: the response reports these.
-        reduced: per view the factor k its images were decoded smaller by (1: as sent). ``views`` and
-            ``boxes`` are in those reduced pixels (u' = (u + 0.5) / k - 0.5, as ``Camera.scale``).
+        reduced: per view the factor k from the pixels of the request's coordinates (the images as sent, or the
+            calibrated ones of the camera's ``image_size`` when the images were sent 1/2, 1/4 or 1/8 of it) to
+            those decoded (1: the same). ``views`` and ``boxes`` are in the decoded pixels (u' = (u + 0.5) / k -
+            0.5, as ``Camera.scale``).
         up: (3,) unit vector, the room's up direction in the reference frame, or None (not sent).
         notes: named findings about the views that go with the answer (``posenet.rig.check.scene_findings``:
             ``views_disagree``); those that make any answer wrong are refused with a 422 instead.
@@ -96,7 +98,8 @@ def _camera(view: ViewIn, i: int, width: int, height: int) -> Camera:
     if cam.image_size is not None and tuple(cam.image_size) != (width, height):
         raise InputError(
             f"{where}.image_size is {cam.image_size[0]}x{cam.image_size[1]} but view {i}'s images are "
-            f"{width}x{height}; send the images at the calibrated size or rescale the intrinsics"
+            f"{width}x{height}; send the images at the calibrated size (or exactly 1/2, 1/4 or 1/8 of it) or "
+            "rescale the intrinsics"
         )
     if not (0 <= cam.cx <= width and 0 <= cam.cy <= height):
         raise InputError(
@@ -148,13 +151,13 @@ _DECODERS = ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 2), thread_n
 
 
 def _decode_all(
-    scene: SceneIn, files: Mapping[str, bytes], limits: Limits, reduced: list[int]
+    scene: SceneIn, files: Mapping[str, bytes], limits: Limits, factors: list[int]
 ) -> dict[str, Future]:
     """Start decoding every view's colour and depth part; ``result()`` returns the image or raises its
     InputError."""
     jobs = {}
     for i, view in enumerate(scene.views):
-        k = reduced[i]
+        k = factors[i]  # decoded 1/k of the size sent
         if f"depth_{i}" in files:
             jobs[f"depth_{i}"] = _DECODERS.submit(
                 decode_depth,
@@ -171,19 +174,34 @@ def _decode_all(
     return jobs
 
 
-def _reduction(files: Mapping[str, bytes], i: int, limits: Limits) -> int:
-    """View i's decoding factor: from its depth header, and only when its colour has the same size (else 1,
-    so that a size mismatch is reported in the pixels that were sent)."""
+SENT_REDUCTIONS = (2, 4, 8)  # an image this many times smaller than its camera's image_size: sent reduced
+
+
+def _reduction(scene: SceneIn, files: Mapping[str, bytes], i: int, limits: Limits) -> tuple[int, int]:
+    """View i's factors ``(sent, decode)``: ``sent`` k when its images are exactly 1/k of its camera's
+    ``image_size`` (the client reduced them: they are read as the calibrated image brought to 1/k, and every
+    coordinate stays in the calibrated pixels), and the factor they are decoded smaller by, from the depth
+    header. Both are 1 unless the colour has the depth's size, so that a size mismatch is reported in the pixels
+    that were sent."""
     sizes = []
     for part in (f"depth_{i}", f"color_{i}"):
         if part in files:
             try:
                 sizes.append(header_size(files[part], part))
             except InputError:
-                return 1  # the decoder reports it
+                return 1, 1  # the decoder reports it
     if not sizes or len(set(sizes)) != 1:
-        return 1
-    return reduction(*sizes[0], limits.read_size)
+        return 1, 1
+    (width, height), calibrated = sizes[0], scene.views[i].camera.image_size
+    sent = next(
+        (
+            k
+            for k in SENT_REDUCTIONS
+            if calibrated is not None and [width * k, height * k] == list(calibrated)
+        ),
+        1,
+    )
+    return sent, reduction(width, height, limits.read_size)
 
 
 def validate_scene(
@@ -217,8 +235,9 @@ def validate_scene(
         if not reference_mode and detector_color
         else None
     )
-    reduced = [_reduction(files, i, limits) for i in range(len(scene.views))]
-    decoded = _decode_all(scene, files, limits, reduced)
+    factors = [_reduction(scene, files, i, limits) for i in range(len(scene.views))]
+    decoded = _decode_all(scene, files, limits, [decode for _, decode in factors])
+    reduced = [sent * decode for sent, decode in factors]  # from the calibrated pixels to those decoded
     try:
         return _validated(scene, files, limits, color_reason, reference_mode, decoded, reduced)
     finally:
@@ -242,7 +261,8 @@ def _validated(
             raise InputError(f"missing file part depth_{i}: every view needs a 16-bit depth PNG")
         depth = decoded[f"depth_{i}"].result()
         k = reduced[i]
-        height, width = depth.shape[0] * k, depth.shape[1] * k  # as sent: every check and message uses these
+        # the request's pixels (as sent, or the calibrated ones): every check and message uses these
+        height, width = depth.shape[0] * k, depth.shape[1] * k
         color = None
         if f"color_{i}" in files:
             color = decoded[f"color_{i}"].result()

@@ -25,10 +25,15 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 def tiny_checkpoints(
-    folder: Path, seed: int = 0, detector: bool = True, depth_only: bool = False
+    folder: Path,
+    seed: int = 0,
+    detector: bool = True,
+    depth_only: bool = False,
+    read_size: tuple[int, int] | None = None,
 ) -> tuple[Path, Path | None]:
     """A random-init pose network and (if ``detector``) a small random-init DETR, saved under ``folder``; with
-    ``depth_only`` both read depth alone (the colourless path: no colour image is needed).
+    ``depth_only`` both read depth alone (the colourless path: no colour image is needed); ``read_size`` (W, H):
+    the pose network crops from views read at that size (``InputConfig.source_size``; None: views as given).
 
     Returns the (pose, detector or None) checkpoint paths."""
     from detector.checkpoint import save_checkpoint as save_detector
@@ -38,7 +43,8 @@ def tiny_checkpoints(
     from posenet.net.model import ModelConfig, PoseNet
 
     torch.manual_seed(seed)
-    pose_cfg = ModelConfig(inputs=InputConfig(modality="depth")) if depth_only else ModelConfig()
+    inputs = InputConfig(modality="depth" if depth_only else "rgbd", source_size=read_size)
+    pose_cfg = ModelConfig(inputs=inputs)
     pose = save_pose(
         folder / "pose", PoseNet(pose_cfg), {"model": dataclasses.asdict(pose_cfg), "data": "random"}
     )

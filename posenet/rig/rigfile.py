@@ -81,8 +81,9 @@ class CameraIn(BaseModel):
     image_size: Size | None = Field(
         None,
         description="(width, height) in pixels the intrinsics were calibrated for; if given, the "
-        "images "
-        "sent must have exactly this size (MVOR: imagesize)",
+        "images sent must have exactly this size (MVOR: imagesize), or exactly 1/2, 1/4 or 1/8 of it: such images "
+        "are read as the calibrated image reduced (GET /model's read_size is the smallest the networks read in "
+        "full), and every coordinate (boxes sent and answered) stays in the calibrated pixels",
     )
 
 

@@ -3,6 +3,7 @@ coordinate of the API still in the pixels of the images as sent."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
@@ -15,6 +16,7 @@ from posenet.boxes import PersonBoxes
 from posenet.data.images import subsample_color, subsample_depth
 from posenet.net.inputs import reduction
 from service.decode import decode_color, decode_depth
+from service.errors import InputError
 from service.response import _sent_boxes
 from service.validation import Limits, parse_scene, validate_scene
 
@@ -93,3 +95,57 @@ def test_served_frame_meets_the_network_as_offline(color_format):
     tol = 0.1 if color_format == "png" else 5.0  # mm (measured: 0.0 and 1.7)
     for p, q in zip(a.persons, b.persons, strict=True):
         np.testing.assert_allclose(q.joints, p.joints, atol=tol)
+
+
+def _sent_reduced(files: dict[str, bytes], k: int = 2) -> dict[str, bytes]:
+    """The views brought to 1/k by the client before sending (``service.client.Transport`` with a read size)."""
+    out = {}
+    for name, data in files.items():
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        small = subsample_depth(image, k) if name.startswith("depth") else subsample_color(image, k)
+        out[name] = cv2.imencode(".png", small)[1].tobytes()
+    return out
+
+
+def _calibrated(text: str, size: list[int] | None) -> str:
+    scene = json.loads(text)
+    for view in scene["views"]:
+        view["camera"]["image_size"] = size
+    return json.dumps(scene)
+
+
+@pytest.mark.parametrize("scene_file", ["scene_boxes.json", "scene.json"])
+def test_views_sent_reduced_are_read_as_the_calibrated_views(scene_file):
+    """Views sent at 1/2 of their camera's image_size are what the server makes of the calibrated views: the
+    same pixels, cameras and boxes, bit for bit, and coordinates in the calibrated pixels."""
+    text = _calibrated((FRAME / scene_file).read_text(), [640, 480])
+    limits = Limits(read_size=(320, 240))
+    full = validate_scene(parse_scene(text, limits), _files("png"), limits, True)
+    sent = validate_scene(parse_scene(text, limits), _sent_reduced(_files("png")), limits, True)
+    assert full.reduced == sent.reduced == [2, 2, 2]
+    for a, b in zip(full.views, sent.views, strict=True):
+        np.testing.assert_array_equal(a.color, b.color)
+        np.testing.assert_array_equal(a.depth, b.depth)
+        assert torch.equal(a.camera.intrinsics, b.camera.intrinsics) and a.camera.size == b.camera.size
+    if full.boxes is not None:
+        for a, b, c, d in zip(full.boxes, sent.boxes, full.sent_boxes, sent.sent_boxes, strict=True):
+            np.testing.assert_array_equal(a, b)
+            np.testing.assert_array_equal(c, d)
+    # A server that reads 640x480 in full decodes nothing smaller: the reduced views are scaled up in
+    # coordinates only (their pixels as sent).
+    wide = Limits(read_size=(640, 480))
+    small = validate_scene(parse_scene(text, wide), _sent_reduced(_files("png")), wide, True)
+    assert small.reduced == [2, 2, 2]
+
+
+def test_views_of_another_size_than_the_calibration_are_refused_with_the_sizes_it_takes():
+    limits = Limits(read_size=(320, 240))
+    text = _calibrated((FRAME / "scene_boxes.json").read_text(), [640, 480])
+    with pytest.raises(InputError, match=r"images are 160x120.*or exactly 1/2, 1/4 or 1/8 of it"):
+        # 1/4 of the images sent against a calibration of 4/3 of 480x360: not an exact fraction
+        scene = parse_scene(_calibrated(text, [480, 360]), limits)
+        validate_scene(scene, _sent_reduced(_files("png"), 4), limits, True)
+    # Without image_size the views are taken as sent, and the calibrated intrinsics do not fit them.
+    plain = (FRAME / "scene.json").read_text()
+    with pytest.raises(InputError, match="principal point .* lies outside view 0's 320x240 image"):
+        validate_scene(parse_scene(plain, limits), _sent_reduced(_files("png")), limits, True)

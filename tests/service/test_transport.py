@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from posenet.data.images import DEPTH_PNG_PARAMS
+from posenet.data.images import DEPTH_PNG_PARAMS, subsample_color, subsample_depth
 from service.client import Transport
 
 
@@ -48,3 +48,28 @@ def test_jpeg_colour_and_fast_depth(images):
 def test_bad_choices_are_refused(bad):
     with pytest.raises(ValueError):
         Transport(**bad)
+
+
+def test_views_reduced_to_the_read_size_before_sending(tmp_path):
+    rng = np.random.default_rng(1)
+    color = rng.integers(0, 255, (96, 128, 3), dtype=np.uint8)
+    depth = rng.integers(500, 6000, (96, 128)).astype(np.uint16)
+    depth[::5] = 0
+    cv2.imwrite(str(tmp_path / "c.png"), color)
+    cv2.imwrite(str(tmp_path / "d.png"), depth)
+    for t in (Transport(read_size=(32, 24)), Transport("jpeg", read_size=(32, 24))):
+        color_part, depth_part, recorded = t.view_parts(tmp_path / "c.png", tmp_path / "d.png")
+        assert recorded == (128, 96)  # 1/4 of it is the largest reduction still at least 32x24
+        sent_depth = cv2.imdecode(np.frombuffer(depth_part[1], np.uint8), cv2.IMREAD_UNCHANGED)
+        np.testing.assert_array_equal(sent_depth, subsample_depth(depth, 4))  # lossless, the server's rule
+        sent_color = cv2.imdecode(np.frombuffer(color_part[1], np.uint8), cv2.IMREAD_COLOR)
+        err = np.abs(sent_color.astype(int) - subsample_color(color, 4)).max()
+        assert (err == 0) if t.color == "png" else (sent_color.shape == (24, 32, 3))
+    # Nothing to reduce: sent as recorded, bytes untouched; no colour leaves a depth-only client.
+    as_is = Transport(read_size=(128, 96)).view_parts(tmp_path / "c.png", tmp_path / "d.png")
+    assert as_is == (
+        ("c.png", (tmp_path / "c.png").read_bytes(), "image/png"),
+        ("d.png", (tmp_path / "d.png").read_bytes(), "image/png"),
+        None,
+    )
+    assert Transport("none", read_size=(32, 24)).view_parts(tmp_path / "c.png", tmp_path / "d.png")[0] is None
