@@ -106,6 +106,11 @@ def _camera(view: ViewIn, i: int, width: int, height: int) -> Camera:
             f"{where}: the principal point ({cam.cx:.1f}, {cam.cy:.1f}) lies outside view {i}'s "
             f"{width}x{height} "
             "image; the intrinsics were probably calibrated for another resolution"
+            + (
+                ""
+                if cam.image_size is not None
+                else " (images sent at 1/2, 1/4 or 1/8 of the calibrated size need the camera's image_size)"
+            )
         )
     camera = camera_of(cam, size=(width, height))
     if not bool(is_rigid(camera.extrinsics)):
