@@ -9,7 +9,8 @@ the first 12 frames of the MVOR twin, rendered into a temporary folder with ``po
 configurations: a frame with 1 person and one with 3 persons, each with reference boxes (detector off) and
 with the detector on. For each it reports the client-side latency p50/p95 over ``--requests`` sequential
 requests and the server's per-stage breakdown (decode, detect, match, pose, encode), then the throughput at
-concurrency 1 and 4 (detector on, 3-person frame), and the server's peak RSS. ``--out`` also writes JSON.
+concurrency 1 and 4 (detector on, 3-person frame), and the server's peak RSS. ``--out`` also writes JSON,
+``--plot`` a picture of the variants' stages (``--replot`` draws it again from ``--out`` files).
 
 ``--variants`` compares ways of running the same weights side by side in one run, one server each:
 ``default`` (the shipped settings: backend and precision ``auto``), ``default-jpeg`` (the same server, colour
@@ -31,6 +32,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -192,7 +194,26 @@ def main(argv: list[str] | None = None) -> dict:
         "(png-fast: PNG filter NONE, zlib level 3), as a camera-side writer can send it",
     )  # fmt: skip
     parser.add_argument("--out", type=Path, help="also write the results as JSON here")
+    parser.add_argument(
+        "--plot", type=Path,
+        help="also draw the variants' 3-person detector frame as stacked server stages beside the client p50 (PNG)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--replot", type=Path, nargs="+", metavar="JSON",
+        help="instead of measuring: draw --plot from these --out files (their variants side by side, in order)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.replot:
+        if not args.plot:
+            raise SystemExit("--replot draws a picture: give --plot OUT.png")
+        runs = [(p.stem, json.loads(p.read_text())) for p in args.replot]
+        named = [
+            (f"{name} ({stem})" if len(runs) > 1 else name, r)
+            for stem, run in runs
+            for name, r in run["variants"].items()
+        ]
+        plot_stages(named, args.plot)
+        return {}
 
     results = {"threads": args.threads, "color_format": args.color_format, "depth_format": args.depth_format,
                "variants": {}}  # fmt: skip
@@ -221,7 +242,45 @@ def main(argv: list[str] | None = None) -> dict:
     print(side_by_side(results["variants"]))
     if args.out:
         args.out.write_text(json.dumps(results, indent=2))
+    if args.plot:
+        plot_stages(list(results["variants"].items()), args.plot)
     return results
+
+
+def plot_stages(variants: list[tuple[str, dict]], out: Path, config: str = "3p_detector") -> None:
+    """One horizontal bar per ``(name, result)``: the server's stage p50s stacked (decode, detect, match, pose,
+    encode), and a tick at the client's p50 (the rest is HTTP and the client), with the machine line as title."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from posenet.runtime.execution import machine_line
+
+    stages = ("decode", "detect", "match", "pose", "encode")
+    colours = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple")
+    fig, ax = plt.subplots(figsize=(8, 0.5 * len(variants) + 2.0))
+    for row, (_, r) in enumerate(variants):
+        c = r["configs"][config]
+        left = 0.0
+        for stage, colour in zip(stages, colours, strict=True):
+            width = c["stages_ms_p50"][stage]
+            ax.barh(row, width, left=left, color=colour, label=stage if row == 0 else None)
+            left += width
+        p50 = c["latency_ms"]["p50"]
+        ax.plot(
+            [p50, p50], [row - 0.4, row + 0.4], color="black", lw=2, label="client p50" if row == 0 else None
+        )
+        ax.text(p50 + 1, row, f"{p50:.0f} ms", va="center", fontsize=8)
+    ax.set_yticks(range(len(variants)), [name for name, _ in variants], fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlabel(f"ms per frame ({config.replace('_', ', ')}; server stages: p50 each)")
+    machines = dict.fromkeys(machine_line(r["model"]["machine"]) for _, r in variants)
+    fig.suptitle("\n".join(textwrap.fill(m, 110) for m in machines), fontsize=7)
+    ax.legend(fontsize=7, ncol=6, loc="upper center", bbox_to_anchor=(0.5, -0.1 - 0.3 / len(variants)))
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
 
 
 def side_by_side(variants: dict, config: str = "3p_detector") -> str:
