@@ -4,7 +4,8 @@ Usage::
 
     nice python benchmarks/posenet_speed.py --threads 2 [--json OUT.json]
 
-For each preset (``cpu``: 96x96 person crops, U-Net base 16; ``cpu-wide``: the same at base 24; ``paper``: full
+For each preset (``cpu``: 96x96 person crops, U-Net base 16; ``cpu-wide``: the same at base 24; ``cpu-narrow`` and
+``cpu-8``: at base 12 and 8; ``paper``: full
 320x240 images, base 64) and each execution setting (fp32 / bf16 autocast x contiguous / channels_last; ``auto``:
 the precision this machine gets, channels_last, as the service and training run by default; ``onnxruntime`` /
 ``openvino``: the U-Net on an inference runtime, inference only), it times on random 3-view scenes of 320x240 (the
@@ -49,6 +50,9 @@ PRESETS = {
 }
 # the cpu preset widened (posenet.training.train --base 24 --init a base-16 checkpoint; docs/RESULTS.md, "What we tried")
 PRESETS["cpu-wide"] = {**PRESETS["cpu"], "base": 24}
+# narrower, for serving (issue 47's "a smaller U-Net"): what the pose stage would save, measured before training one
+PRESETS["cpu-narrow"] = {**PRESETS["cpu"], "base": 12}
+PRESETS["cpu-8"] = {**PRESETS["cpu"], "base": 8}
 SETTINGS = {  # name: (precision, channels_last, backend)
     "fp32": ("fp32", False, "torch"),
     "fp32+channels_last": ("fp32", True, "torch"),
