@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from posenet.cameras import Camera, is_rigid, pixel_grid
+from posenet.cameras import Camera, is_rigid, pixel_grid, transform_points
 from posenet.rig.geometry import PLAUSIBLE_SPACING_MM, camera_spacing, common_view, image_up
 from posenet.rig.rigfile import Rig
 
@@ -165,30 +165,37 @@ def depth_agreement(rig: Rig, depths: list[np.ndarray], stride: int = 4) -> list
                 f"depth frame {i} is {d.shape[1]}x{d.shape[0]} but camera {i} is {c.size[0]}x{c.size[1]}"
             )
     clouds = [lift_depth(c, d, stride) for c, d in zip(rig.cameras, depths, strict=True)]
+    to_camera = [c.ref_to_camera for c in rig.cameras]  # each inverted once, not once per pair
     out = []
     for i, points in enumerate(clouds):
         for j, (cam, depth) in enumerate(zip(rig.cameras, depths, strict=True)):
             if i == j or len(points) == 0:
                 continue
-            in_j = cam.to_camera(points)  # (N, 3)
-            uv = cam.project_camera(in_j).round().long()
+            in_j = transform_points(to_camera[j], points)  # (N, 3): cam.to_camera(points)
+            uv = cam.project_camera(in_j).round().long().numpy()
+            z = in_j[:, 2].numpy()
             h, w = depth.shape
-            inside = (in_j[:, 2] > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
-            measured = torch.zeros(len(points), dtype=torch.float64)
-            measured[inside] = torch.as_tensor(
-                depth[uv[inside, 1].numpy(), uv[inside, 0].numpy()].astype(np.float64)
-            )
+            inside = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+            measured = np.zeros(len(z))
+            measured[inside] = depth[uv[inside, 1], uv[inside, 0]]
             seen = inside & (measured > 0)
-            diff = (measured - in_j[:, 2])[seen]
-            near = diff[diff.abs() < 4 * AGREE_MM]
+            diff = (measured - z)[seen]
+            near = diff[np.abs(diff) < 4 * AGREE_MM]
             out.append({
                 "pair": (i, j),
-                "overlap": float(seen.float().mean()),
-                "median_abs_mm": float(near.abs().median()) if len(near) else float("nan"),
-                "median_mm": float(near.median()) if len(near) else float("nan"),
-                "within": float((diff.abs() < AGREE_MM).float().mean()) if len(diff) else float("nan"),
+                "overlap": float(seen.mean()),
+                "median_abs_mm": _lower_median(np.abs(near)),
+                "median_mm": _lower_median(near),
+                "within": float((np.abs(diff) < AGREE_MM).mean()) if len(diff) else float("nan"),
             })  # fmt: skip
     return out
+
+
+def _lower_median(values: np.ndarray) -> float:
+    """The lower of the two middle values (torch.median's convention), NaN without any."""
+    if not len(values):
+        return float("nan")
+    return float(np.partition(values, (len(values) - 1) // 2)[(len(values) - 1) // 2])
 
 
 def find_floor(
