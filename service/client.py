@@ -144,12 +144,27 @@ class Transport:
         if k == 1:  # as recorded (a file the server cannot read goes as it is, for the server to say why)
             color_part = None if self.color == "none" else self.color_part(color.name, color.read_bytes())
             return color_part, self.depth_part(depth.name, depth_bytes), None
-        reduced = cv2.imencode(".png", subsample_depth(image, k), DEPTH_PNG_PARAMS)[1].tobytes()
+        bgr = None if self.color == "none" else cv2.imread(str(color), cv2.IMREAD_COLOR)
+        color_part, depth_part, recorded = self.encode_view(bgr, image, color.name, depth.name)
+        return color_part, depth_part, recorded
+
+    def encode_view(
+        self,
+        bgr: np.ndarray | None,
+        depth: np.ndarray,
+        color_name: str = "color.png",
+        depth_name: str = "depth.png",
+    ) -> tuple[tuple | None, tuple, tuple[int, int] | None]:
+        """A view's file parts from images in memory (a live camera's frame): ``bgr (H, W, 3)`` uint8 (OpenCV's
+        order; None: no colour) and ``depth (H, W)`` uint16 mm, reduced to ``read_size`` when it is set; returns
+        as :meth:`view_parts`. Send the camera as calibrated, with ``image_size`` the recorded (W, H)."""
+        k = 1 if self.read_size is None else reduction(depth.shape[1], depth.shape[0], self.read_size)
+        depth_png = cv2.imencode(".png", subsample_depth(depth, k), DEPTH_PNG_PARAMS)[1].tobytes()
         color_part = None
-        if self.color != "none":
-            bgr = cv2.imread(str(color), cv2.IMREAD_COLOR)
-            color_part = self._encoded_color(color.name, subsample_color(bgr, k))
-        return color_part, (depth.name, reduced, "image/png"), (image.shape[1], image.shape[0])
+        if self.color != "none" and bgr is not None:
+            color_part = self._encoded_color(color_name, subsample_color(bgr, k))
+        recorded = None if k == 1 else (depth.shape[1], depth.shape[0])
+        return color_part, (depth_name, depth_png, "image/png"), recorded
 
 
 def scene_request(

@@ -73,3 +73,18 @@ def test_views_reduced_to_the_read_size_before_sending(tmp_path):
         None,
     )
     assert Transport("none", read_size=(32, 24)).view_parts(tmp_path / "c.png", tmp_path / "d.png")[0] is None
+
+
+def test_a_live_cameras_arrays_make_the_same_parts_as_its_files(tmp_path):
+    rng = np.random.default_rng(2)
+    color = rng.integers(0, 255, (96, 128, 3), dtype=np.uint8)
+    depth = rng.integers(500, 6000, (96, 128)).astype(np.uint16)
+    cv2.imwrite(str(tmp_path / "c.png"), color)
+    cv2.imwrite(str(tmp_path / "d.png"), depth)
+    t = Transport(read_size=(64, 48))
+    assert t.encode_view(color, depth, "c.png", "d.png") == t.view_parts(tmp_path / "c.png", tmp_path / "d.png")
+    # Without a read size the arrays are encoded as they are.
+    color_part, depth_part, recorded = Transport().encode_view(color, depth)
+    assert recorded is None and color_part[2] == "image/png"
+    back = cv2.imdecode(np.frombuffer(depth_part[1], np.uint8), cv2.IMREAD_UNCHANGED)
+    np.testing.assert_array_equal(back, depth)
