@@ -82,3 +82,17 @@ def test_a_colour_server_names_what_needs_colour(tmp_path, tiny):
         assert client.get("/model").json()["detector_modalities"] == ["color"]
         r = client.post("/scenes", data={"scene": json.dumps(scene)}, files=files)
     assert r.status_code == 422 and "missing file part color_0" in r.json()["detail"], r.text
+
+
+def test_send_size_read_sends_as_recorded_where_the_server_reads_views_as_sent(
+    depth_server, tiny, tmp_path, capsys
+):
+    """These tiny models have no read size (GET /model's read_size is null): --send-size read says so and sends
+    the views as recorded."""
+    data, _ = tiny
+    assert depth_server.get("/model").json()["read_size"] is None
+    out = tmp_path / "pred.jsonl"
+    args = [str(data.root), "--annotations", str(data.annotations), "--url", str(depth_server.base_url)]
+    assert main([*args, "--out", str(out), "--color-format", "none", "--send-size", "read"]) == 0
+    assert "the server reads views as sent" in capsys.readouterr().out
+    assert all(json.loads(line)["status"] == 200 for line in out.read_text().splitlines())
