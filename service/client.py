@@ -136,17 +136,21 @@ class Transport:
     def view_parts(self, color: Path, depth: Path) -> tuple[tuple | None, tuple, tuple[int, int] | None]:
         """A view's colour part (None with ``none``) and depth part from its files, and the (W, H) of the images
         as recorded when they were sent reduced (None: sent at that size)."""
-        depth_bytes = depth.read_bytes()
-        k, image = 1, None
+        depth_bytes = depth.read_bytes()  # a missing file raises here, as recorded or reduced
+        color_bytes = None if self.color == "none" else color.read_bytes()
         if self.read_size is not None:
             image = cv2.imdecode(np.frombuffer(depth_bytes, np.uint8), cv2.IMREAD_UNCHANGED)
-            k = 1 if image is None else reduction(image.shape[1], image.shape[0], self.read_size)
-        if k == 1:  # as recorded (a file the server cannot read goes as it is, for the server to say why)
-            color_part = None if self.color == "none" else self.color_part(color.name, color.read_bytes())
-            return color_part, self.depth_part(depth.name, depth_bytes), None
-        bgr = None if self.color == "none" else cv2.imread(str(color), cv2.IMREAD_COLOR)
-        color_part, depth_part, recorded = self.encode_view(bgr, image, color.name, depth.name)
-        return color_part, depth_part, recorded
+            bgr = (
+                None
+                if color_bytes is None
+                else cv2.imdecode(np.frombuffer(color_bytes, np.uint8), cv2.IMREAD_COLOR)
+            )
+            readable = image is not None and image.ndim == 2 and (color_bytes is None or bgr is not None)
+            if readable and reduction(image.shape[1], image.shape[0], self.read_size) > 1:
+                return self.encode_view(bgr, image, color.name, depth.name)
+        # as recorded (a file the client cannot read goes as it is, for the server to say why)
+        color_part = None if color_bytes is None else self.color_part(color.name, color_bytes)
+        return color_part, self.depth_part(depth.name, depth_bytes), None
 
     def encode_view(
         self,

@@ -88,3 +88,15 @@ def test_a_live_cameras_arrays_make_the_same_parts_as_its_files(tmp_path):
     assert recorded is None and color_part[2] == "image/png"
     back = cv2.imdecode(np.frombuffer(depth_part[1], np.uint8), cv2.IMREAD_UNCHANGED)
     np.testing.assert_array_equal(back, depth)
+
+
+def test_views_the_client_cannot_read_go_as_recorded_for_the_server_to_say_why(tmp_path):
+    depth = np.full((96, 128), 2000, np.uint16)
+    cv2.imwrite(str(tmp_path / "d.png"), depth)
+    (tmp_path / "c.png").write_bytes(b"not an image")
+    t = Transport(read_size=(32, 24))
+    color_part, depth_part, recorded = t.view_parts(tmp_path / "c.png", tmp_path / "d.png")
+    assert recorded is None and color_part[1] == b"not an image"
+    assert depth_part[1] == (tmp_path / "d.png").read_bytes()
+    with pytest.raises(FileNotFoundError):  # a missing file is the client's failure, as when sent as recorded
+        t.view_parts(tmp_path / "missing.png", tmp_path / "d.png")
