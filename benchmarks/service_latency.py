@@ -48,7 +48,7 @@ from service_harness import Server, tiny_checkpoints  # noqa: E402
 from pipeline.matching import match_boxes  # noqa: E402
 from posenet.data.images import read_depth  # noqa: E402
 from posenet.data.mvor import MvorDataset  # noqa: E402
-from service.client import Transport, scene_request  # noqa: E402
+from service.client import Transport, read_size_of, scene_request  # noqa: E402
 
 MVOR_JSON = REPO.parent / "shared" / "mvor" / "camma_mvor_2018.json"
 STAGES = ("decode", "detect", "match", "pose", "encode", "total")
@@ -314,8 +314,9 @@ def run_variant(
     server = Server(env)
     with server as url, httpx.Client(base_url=url, timeout=300) as client:
         model = client.get("/model").json()
-        read_size = tuple(model["read_size"]) if at_read_size and model.get("read_size") else None
-        transport = Transport(color_format, depth_format, read_size=read_size)
+        transport = Transport(
+            color_format, depth_format, read_size=read_size_of(model) if at_read_size else None
+        )
         result = {"model": model, "configs": {}}
         for persons, index in frames.items():
             sample = ds[index]

@@ -41,7 +41,7 @@ sys.path.insert(0, str(REPO / "tests"))  # the test harness starts and stops the
 from service_harness import Server  # noqa: E402
 
 from posenet.data.mvor import MvorDataset  # noqa: E402
-from service.client import Transport, scene_request  # noqa: E402
+from service.client import Transport, read_size_of, scene_request  # noqa: E402
 
 VARIANTS = {  # name: (the server's environment, the transport)
     "default": ({}, Transport()),
@@ -133,8 +133,8 @@ def run_variant(name: str, root: Path, rates: list[float], seconds: float, frame
     env = {"ORPOSE_THREADS": str(threads), "ORPOSE_MAX_IN_FLIGHT": "16", **env}
     with Server(env, startup_s=900) as url, httpx.Client(base_url=url, timeout=60) as client:
         model = client.get("/model").json()
-        if name in AT_READ_SIZE and model.get("read_size"):
-            transport = dataclasses.replace(transport, read_size=tuple(model["read_size"]))
+        if name in AT_READ_SIZE:
+            transport = dataclasses.replace(transport, read_size=read_size_of(model))
         prepared = forms(root, frames, transport)
         for k in range(3):  # warm-up: first calls compile kernels
             client.post(

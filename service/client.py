@@ -140,14 +140,15 @@ class Transport:
         color_bytes = None if self.color == "none" else color.read_bytes()
         if self.read_size is not None:
             image = cv2.imdecode(np.frombuffer(depth_bytes, np.uint8), cv2.IMREAD_UNCHANGED)
-            bgr = (
-                None
-                if color_bytes is None
-                else cv2.imdecode(np.frombuffer(color_bytes, np.uint8), cv2.IMREAD_COLOR)
-            )
-            readable = image is not None and image.ndim == 2 and (color_bytes is None or bgr is not None)
-            if readable and reduction(image.shape[1], image.shape[0], self.read_size) > 1:
-                return self.encode_view(bgr, image, color.name, depth.name)
+            if image is not None and image.ndim == 2 and reduction(*image.shape[::-1], self.read_size) > 1:
+                # the colour is decoded only for a view that is reduced
+                bgr = (
+                    None
+                    if color_bytes is None
+                    else cv2.imdecode(np.frombuffer(color_bytes, np.uint8), cv2.IMREAD_COLOR)
+                )
+                if color_bytes is None or bgr is not None:
+                    return self.encode_view(bgr, image, color.name, depth.name)
         # as recorded (a file the client cannot read goes as it is, for the server to say why)
         color_part = None if color_bytes is None else self.color_part(color.name, color_bytes)
         return color_part, self.depth_part(depth.name, depth_bytes), None
@@ -617,9 +618,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def read_size_of(model: dict) -> tuple[int, int] | None:
+    """The ``read_size`` of a ``GET /model`` answer as ``Transport`` takes it (None: the server reads views as
+    sent)."""
+    size = model.get("read_size")
+    return None if size is None else (int(size[0]), int(size[1]))
+
+
 def served_read_size(url: str, token: str | None) -> tuple[int, int] | None:
-    """GET /model's ``read_size`` (None: the server reads views as sent); exits with the reason when the server
-    cannot say."""
+    """GET /model's ``read_size`` (:func:`read_size_of`); exits with the reason when the server cannot say."""
     try:
         r = httpx.get(f"{url.rstrip('/')}/model", headers=_headers(ClientConfig(token=token)), timeout=30)
         r.raise_for_status()
@@ -627,11 +634,10 @@ def served_read_size(url: str, token: str | None) -> tuple[int, int] | None:
         raise SystemExit(
             f"--send-size read asks the server for its read size (GET {url}/model): {exc}"
         ) from None
-    size = r.json().get("read_size")
+    size = read_size_of(r.json())
     if size is None:
         print("--send-size read: the server reads views as sent (no read_size); sending them as recorded")
-        return None
-    return int(size[0]), int(size[1])
+    return size
 
 
 def main(argv: list[str] | None = None) -> int:
