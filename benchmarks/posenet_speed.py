@@ -31,7 +31,6 @@ import argparse
 import json
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -148,6 +147,8 @@ def bench(preset: str, setting: str, repeats: int, persons_list=(1, 3, 6)) -> di
 
 def profile_frame(root, index: int, threads: int, repeats: int) -> dict:
     """The pose stage of frame ``index`` of the MVOR-format dataset ``root``, part by part (module docstring)."""
+    from pathlib import Path
+
     from pipeline.skeleton_matching import match_heatmaps, members_of
     from pipeline.two_stage import ScenePipeline
     from posenet.data.mvor import MvorDataset
@@ -166,7 +167,7 @@ def profile_frame(root, index: int, threads: int, repeats: int) -> dict:
     held = sum(len(k) for p in result.persons for k in p.box_indices)
     heat = pipe.pose.box_heatmaps(views, boxes)
     heat.reduce()
-    lazy, _, groups, _ = pipe._match_skeletons(boxes, views, candidate, detected=True, every_box=False)
+    groups = pipe._match_skeletons(boxes, views, candidate, detected=True)[2]
     members = members_of(groups, boxes)
     crop = cfg.inputs.mode == "crop"
 
@@ -197,12 +198,6 @@ def profile_frame(root, index: int, threads: int, repeats: int) -> dict:
                 heat.estimate(members).joints.double(),
             ),  # fmt: skip
             "run(): match + pose stages": lambda: pipe.run(views, detected=detected),
-            "U-Net + association, unsure boxes within reach (default)": lambda: pipe._match_skeletons(
-                boxes, views, candidate, detected=True, every_box=False
-            ),
-            "U-Net + association, every unsure box (a tracker asks)": lambda: pipe._match_skeletons(
-                boxes, views, candidate, detected=True, every_box=True
-            ),
         }
         ms = {name: 1e3 * median_time(fn, repeats) for name, fn in parts.items()}
     crops_ms = ms["crops (build_box_crops)" if crop else "crops (build_scene)"]
@@ -222,50 +217,9 @@ def profile_frame(root, index: int, threads: int, repeats: int) -> dict:
         "boxes_in_persons": held,
         "persons": len(result.persons),
         "crops_run": int(has.sum()) * len(mirrors),
-        "crops_read_within_reach": int(lazy.computed().sum()) * len(mirrors),
         "unet_gflops": round(flops / 1e9, 2),
         "unet_gflop_per_s": round(flops / 1e9 / (ms["U-Net"] / 1e3), 1),
         "ms": {k: round(v, 1) for k, v in ms.items()},
-    }
-
-
-def unsure_reads(root: str, threads: int, days: list[int] | None) -> dict:
-    """Every frame of ``root`` in detector mode (the shipped weights, as served): the crops the U-Net reads and
-    the milliseconds of the U-Net + association (``ScenePipeline._match_skeletons``) when it reads every unsure
-    box at once, as for a stream's tracker, and when it reads only those within reach of a person
-    (``pipeline.skeleton_matching.within_reach``, the default), alternating on each frame; and whether the
-    persons are the same."""
-    from pipeline.two_stage import ScenePipeline
-    from posenet.data.mvor import MvorDataset
-
-    torch.set_num_threads(threads)
-    root = Path(root)
-    pipe = ScenePipeline.from_checkpoints(backend="auto", threads=threads)
-    ds = MvorDataset(root, root / "annotations.json", subsample=2, days=days)
-    counts = {"frames": len(ds), "boxes": 0, "unsure": 0, "crops_every": 0, "crops_within_reach": 0}
-    ms = {"every": [], "within_reach": []}
-    same = 0
-    for i in range(len(ds)):
-        views = ds[i].views
-        det = pipe.detect(views)
-        counts["boxes"] += sum(len(b) for b in det.boxes)
-        counts["unsure"] += int(sum(c.sum() for c in det.candidate)) if det.candidate is not None else 0
-        out = {}
-        for mode in ("every", "within_reach") if i % 2 else ("within_reach", "every"):
-            t0 = time.perf_counter()
-            heat, _, groups, _ = pipe._match_skeletons(
-                det.boxes, views, det.candidate, detected=True, every_box=mode == "every"
-            )
-            ms[mode].append((time.perf_counter() - t0) * 1e3)
-            counts[f"crops_{mode}"] += int(heat.computed().sum())
-            out[mode] = [g.indices for g in groups]
-        same += out["every"] == out["within_reach"]
-    return {
-        "data": str(root),
-        **counts,
-        "same_persons_frames": same,
-        "ms_mean": {k: round(statistics.mean(v), 2) for k, v in ms.items()},
-        "ms_median": {k: round(statistics.median(v), 2) for k, v in ms.items()},
     }
 
 
@@ -274,8 +228,7 @@ def format_profile(rows: list[dict]) -> str:
     lines = [
         f"pose stage of one frame, detector mode: boxes per view {r0['boxes_per_view']} ({r0['unsure_boxes']} unsure), "
         f"{r0['boxes_in_persons']} of them in the {r0['persons']} persons answered; the U-Net runs {r0['crops_run']} "
-        f"crops ({r0['unet_gflops']} GFLOP) when it reads every box, {r0['crops_read_within_reach']} when it reads "
-        "only the unsure boxes that could complete a person (the default for POST /scenes)",
+        f"crops ({r0['unet_gflops']} GFLOP)",
         f"{'part (ms, median)':<44}" + "".join(f"{r['threads']:>3} thr {r['runtime']:<22}" for r in rows),
     ]
     for k in r0["ms"]:
@@ -298,30 +251,7 @@ def main() -> None:
     p.add_argument(
         "--index", type=int, default=2, help="--frame: which frame of the dataset (default: %(default)s)"
     )
-    p.add_argument(
-        "--unsure-reads",
-        nargs="+",
-        metavar="DATA",
-        help="instead: on every frame of these MVOR-format datasets, the crops and ms of the U-Net + association "
-        "when every unsure box is read against only those within reach of a person",
-    )
-    p.add_argument("--days", type=int, nargs="*", help="--unsure-reads: only these days")
     args = p.parse_args()
-    if args.unsure_reads:
-        print(machine_line())
-        print(f"{'data':<24}{'frames':>7}{'boxes':>7}{'unsure':>7}{'crops every':>12}{'within reach':>13}"
-              f"{'same':>6}{'ms every':>10}{'within reach':>13}  (U-Net + association, mean)")  # fmt: skip
-        rows = []
-        for root in args.unsure_reads:
-            r = unsure_reads(root, args.threads, args.days)
-            rows.append(r)
-            print(f"{Path(root).name:<24}{r['frames']:>7}{r['boxes']:>7}{r['unsure']:>7}{r['crops_every']:>12}"
-                  f"{r['crops_within_reach']:>13}{r['same_persons_frames']:>6}{r['ms_mean']['every']:>10}"
-                  f"{r['ms_mean']['within_reach']:>13}", flush=True)  # fmt: skip
-        if args.json:
-            with open(args.json, "w") as f:
-                json.dump({"machine": machine_line(), "rows": rows}, f, indent=2)
-        return
     if args.frame:
         print(machine_line())
         rows = [profile_frame(args.frame, args.index, t, args.repeats) for t in sorted({1, args.threads})]

@@ -360,11 +360,6 @@ def match_heatmaps(
                                  None if centres is None else centres[flat])  # fmt: skip
         groups = _in_full_lists(groups, sure)
         if config.candidate_mm is not None and groups:
-            if (
-                not heat.computed().all()
-            ):  # unsure boxes left for later (ScenePipeline): read those that could join
-                if heat.complete(within_reach(heat, groups, boxes, candidate, config.candidate_mm)):
-                    joints, ok = _lifted(heat.single_view())
             groups = admit_candidates(heat, groups, boxes, candidate, joints, ok, config.candidate_mm)
     if not detected:
         return groups
@@ -474,41 +469,6 @@ def drop_outliers(
             indices[v] = -1 if promoted is None else promoted[1]
             extra = [e for e in extra if e != promoted]
         out[p] = Group(tuple(indices), g.centre, g.mean_distance, tuple(extra))
-    return out
-
-
-def within_reach(
-    heat, groups: list[Group], boxes: Sequence[np.ndarray], candidate: Sequence[np.ndarray], within_mm: float,
-    margin_mm: float = 10.0,
-) -> np.ndarray:  # fmt: skip
-    """(N,) bool: the unsure boxes (``candidate``) that :func:`admit_candidates` could give a person, decided
-    before the U-Net reads them (ScenePipeline leaves the unsure boxes' heatmaps for later).
-
-    A box alone lifts each joint to a softmax-weighted mean of its crop's valid points, which lies inside their
-    axis-aligned bounding box; a median joint distance within ``within_mm`` needs at least half of the person's
-    usable joints within that of the box's joints. So a box is out of reach of a person when fewer than half of
-    the person's joints lie within ``within_mm`` (+ ``margin_mm`` for rounding) of its points' bounding box; and
-    only persons without a box in its view compete for it. (A box's joints are usable all or none: its points
-    vote for every joint.) On the unseen looks' day 4 this leaves 54 % of the unsure boxes unread (2026-12-07)."""
-    out = np.zeros(sum(len(np.asarray(b).reshape(-1, 4)) for b in boxes), bool)
-    starts = box_starts(boxes)
-    lacking = [[p for p, g in enumerate(groups) if g.indices[v] < 0] for v in range(len(boxes))]
-    if not any(lacking[v] and np.any(c) for v, c in enumerate(candidate)):
-        return out
-    person, person_ok = _lifted(heat.estimate(members_of(groups, boxes)))  # (P, J, 3), (P, J)
-    need = (person_ok.sum(1) + 1) // 2  # (P,) joints within reach for a median within it
-    for v, cand in enumerate(candidate):
-        if not lacking[v]:
-            continue
-        for n in starts[v] + np.flatnonzero(np.asarray(cand, bool).reshape(-1)):
-            lo, hi = heat.point_bounds(int(n))
-            if lo is None:  # no valid point: no skeleton to admit
-                continue
-            gap = np.linalg.norm(
-                np.maximum(lo - person[lacking[v]], 0) + np.maximum(person[lacking[v]] - hi, 0), axis=-1
-            )
-            close = ((gap <= within_mm + margin_mm) & person_ok[lacking[v]]).sum(1)  # (P',)
-            out[n] = bool((close >= np.maximum(need[lacking[v]], 1)).any())
     return out
 
 

@@ -397,7 +397,7 @@ class ScenePipeline:
         elif any(len(b) for b in boxes) and self.config.matcher.startswith("skeletons"):
             boxes, scores, candidate = self._fit_boxes(boxes, scores, limit, why, candidate)
             heat, timings["match"], matched, centres = self._match_skeletons(
-                boxes, views, candidate, detected=scores[0] is not None, every_box=bool(unsure)
+                boxes, views, candidate, detected=scores[0] is not None
             )
             all_matched = matched
             timings["pose"] += _ms(t0) - timings["match"]
@@ -545,22 +545,14 @@ class ScenePipeline:
         views: list[SceneView],
         candidate=None,
         detected: bool = False,
-        every_box: bool = True,
     ):
         """The U-Net once on every box, each box lifted alone, the boxes grouped by their skeletons.
 
-        ``every_box`` False: the U-Net first reads the sure boxes only, and then those unsure ones that could
-        complete a person (``pipeline.skeleton_matching.within_reach``): the same persons, without the crops
-        of unsure boxes that could end in nobody. True (a tracker asks about unsure boxes): all at once.
-
         Returns ``(heat, match_ms, groups, centres)``: the heatmaps to fuse from, the milliseconds of the
-        association (after the U-Net and each box's softmax moments, which the fusion needs with any grouping,
-        and without the U-Net's later reads), the persons (``pipeline.matching.Group``), and every box's 3D
-        centre (N, 3) (``group_unsure`` reads them again)."""
-        only = None
-        if not every_box and candidate is not None:
-            only = ~np.concatenate([np.asarray(c, bool).reshape(-1) for c in candidate])
-        heat = self.pose.box_heatmaps(list(views), boxes, only)
+        association (after the U-Net and each box's softmax moments, which the fusion needs with any grouping),
+        the persons (``pipeline.matching.Group``), and every box's 3D centre (N, 3) (``group_unsure`` reads
+        them again)."""
+        heat = self.pose.box_heatmaps(list(views), boxes)
         heat.reduce()  # the fusion's per-box softmax, needed whatever groups the boxes: the pose stage's
         t0 = time.perf_counter()
         centres = box_centres_3d(boxes, [v.depth for v in views], [v.camera for v in views])[0]
@@ -574,7 +566,7 @@ class ScenePipeline:
             detected=detected,
             centres=centres,
         )
-        return heat, _ms(t0) - heat.late_ms, groups, centres
+        return heat, _ms(t0), groups, centres
 
     # ----------------------------------------------------------------------------------------- offline
     def run_sample(self, sample: Sample, reference_boxes: bool = True) -> tuple[SceneResult, list[dict]]:

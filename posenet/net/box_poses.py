@@ -29,7 +29,6 @@ without one of its boxes) combines a handful of those: no softmax over 9,216 poi
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -57,25 +56,7 @@ class BoxPass:
     depth: Tensor
     valid: Tensor
     points: Tensor | None = None
-    # (N,) bool: the boxes the U-Net has read (None: all). The others' logits are zeros, read as boxes without
-    # valid points, until :meth:`fill` gives them theirs (``BoxHeatmaps.complete``).
-    ready: Tensor | None = None
     _moments: tuple[Tensor, Tensor, Tensor, Tensor] | None = field(default=None, repr=False)
-
-    def _voting(self) -> Tensor:
-        """(N, M) the points that vote: valid, of boxes the U-Net has read."""
-        return self.valid if self.ready is None else self.valid & self.ready[:, None]
-
-    def fill(self, rows: Tensor, logits: Tensor, eps: float) -> None:
-        """Give the boxes ``rows (n,)`` their ``logits (n, J, M)``, and their moments if they were reduced (each
-        box's moments are its own: the same as if it had been read with the others)."""
-        self.logits[rows] = logits
-        if self.ready is not None:
-            self.ready[rows] = True
-        if self._moments is not None:
-            part = BoxPass(logits, self.uv[rows], self.depth[rows], self.valid[rows], self.points[rows])
-            for whole, own in zip(self._moments, part.moments(eps), strict=True):
-                whole[rows] = own
 
     def moments(self, eps: float) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """Per box and joint the softmax cloud's log-sum-exp (N, J), mean (N, J, 3) mm and variance (N, J) mm^2
@@ -83,8 +64,7 @@ class BoxPass:
         box whether it has a valid point at all (N,)."""
         if self._moments is None:
             with torch.inference_mode():
-                voting = self._voting()
-                z = lifting.masked_logits(self.logits[:, None].float(), voting[:, None], eps)[
+                z = lifting.masked_logits(self.logits[:, None].float(), self.valid[:, None], eps)[
                     :, 0
                 ]  # (N, J, M)
                 weights = torch.softmax(z, dim=-1)
@@ -93,7 +73,7 @@ class BoxPass:
                 # the geometry laid out (N, 3, M), so that every reduction runs along contiguous points
                 points = self.points.float().permute(0, 2, 1).contiguous()  # (N, 3, M)
                 # centred on each box's valid points (metre-sized numbers in float32, as aggregate does)
-                w_valid = voting.float().unsqueeze(1)  # (N, 1, M)
+                w_valid = self.valid.float().unsqueeze(1)  # (N, 1, M)
                 centre = (points * w_valid).sum(-1) / w_valid.sum(-1).clamp_min(1)  # (N, 3)
                 # the first and second moments in one product with [q, |q|^2] (N, 4, M): a batched product
                 # with 4 columns of stride 4 runs 3-4x slower on the CPU than with contiguous rows
@@ -107,7 +87,7 @@ class BoxPass:
                     lse.double(),
                     (first + centre.unsqueeze(1)).double(),
                     var.double(),
-                    voting.any(-1),
+                    self.valid.any(-1),
                 )
         return self._moments
 
@@ -132,49 +112,6 @@ class BoxHeatmaps:
     estimate_fn: object
     eps: float = lifting.EPS_LOGIT
     _single: JointEstimate | None = field(default=None, init=False, repr=False)
-    # the boxes the U-Net has not read yet (``box_heatmaps(..., only=...)``): each pass's crops and the U-Net
-    # that reads them on demand (:meth:`complete`), and the milliseconds it has spent doing so
-    _later: tuple[list, object] | None = field(default=None, init=False, repr=False)
-    late_ms: float = field(default=0.0, init=False)
-
-    def computed(self) -> np.ndarray:
-        """(N,) bool: the boxes whose heatmaps are computed (all, unless ``box_heatmaps`` was given ``only``)."""
-        ready = self.passes[0].ready
-        return np.ones(self.num_boxes, bool) if ready is None else ready.numpy().copy()
-
-    def point_bounds(self, box: int) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
-        """The axis-aligned box ``(lo (3,), hi (3,))``, mm, around box ``box``'s valid lifted points in every pass:
-        its joints alone lie inside it, whatever the heatmaps (each is a softmax-weighted mean of those points).
-        ``(None, None)`` where a pass has no valid point (the box lifts no skeleton) or without the 3D
-        aggregation."""
-        if not all(p.points is not None for p in self.passes):
-            return None, None
-        points = [p.points[box][p.valid[box]] for p in self.passes]
-        if any(not len(q) for q in points):
-            return None, None
-        q = torch.cat(points).double().numpy()
-        return q.min(0), q.max(0)
-
-    def complete(self, boxes: np.ndarray) -> bool:
-        """Run the U-Net on those of ``boxes`` (an (N,) bool mask) that it has not read yet; returns whether it
-        ran. Their single-view skeletons and moments are then what they would have been had it read them with
-        the others."""
-        rows = np.flatnonzero(np.asarray(boxes, bool) & ~self.computed())
-        if not len(rows) or self._later is None:
-            return False
-        t0 = time.perf_counter()
-        crops, unet = self._later
-        index, n = torch.from_numpy(rows), len(rows)
-        with torch.inference_mode():  # the tensors were made in it (PoseEstimator.box_heatmaps)
-            heat = unet(
-                torch.cat([c.images[index] for c in crops]) if len(crops) > 1 else crops[0].images[index]
-            )
-            for i, (c, p) in enumerate(zip(crops, self.passes, strict=True)):
-                logits = aug.unflip_channels(heat[i * n : (i + 1) * n], c.flipped[index]).flatten(2)
-                p.fill(index, logits, self.eps)
-        self._single = None
-        self.late_ms += (time.perf_counter() - t0) * 1e3
-        return True
 
     def reduce(self) -> None:
         """Reduce every box's clouds to their softmax moments now (:meth:`BoxPass.moments`): the per-box half of
@@ -314,24 +251,18 @@ def slot_layout(boxes: Sequence[np.ndarray]) -> tuple[Tensor, Tensor, Tensor, Te
     return dense, has, view, index
 
 
-def box_heatmaps(
-    model, views: list, boxes: Sequence[np.ndarray], inputs: InputConfig, only: np.ndarray | None = None
-) -> BoxHeatmaps:
+def box_heatmaps(model, views: list, boxes: Sequence[np.ndarray], inputs: InputConfig) -> BoxHeatmaps:
     """Run ``model`` (a ``PoseNet``) once on every box of a frame; see the module docstring.
 
     Args:
         views: V :class:`posenet.scene.SceneView`\\ s, as ``posenet.net.inputs.build_scene`` takes them.
         boxes: V arrays ``(K_v, 4)`` xyxy pixels of those views (K_v may be 0).
-        only: (N,) bool, the boxes to run the U-Net on now; the others are cropped and lifted but read only when
-            ``BoxHeatmaps.complete`` asks for them, and until then count as boxes without valid points. Crop
-            mode with the 3D aggregation; elsewhere every box is read at once.
     """
     if len(boxes) != len(views):
         raise ValueError(f"got {len(boxes)} box lists for {len(views)} views")
     mirrors = (False, True) if model.config.flip_test else (False,)
     if inputs.mode == "crop":
-        lazy = only is not None and model.config.aggregation == "3d"
-        return _crop_heatmaps(model, views, boxes, inputs, mirrors, np.asarray(only, bool) if lazy else None)
+        return _crop_heatmaps(model, views, boxes, inputs, mirrors)
     dense, has, view, index = slot_layout(boxes)
     scenes: list[SceneInput] = [build_scene(views, dense, has, inputs, mirror=m) for m in mirrors]
     heats = model.heatmaps(scenes)
@@ -351,40 +282,20 @@ def box_heatmaps(
 
 
 def _crop_heatmaps(
-    model,
-    views: list,
-    boxes: Sequence[np.ndarray],
-    inputs: InputConfig,
-    mirrors,
-    only: np.ndarray | None = None,
+    model, views: list, boxes: Sequence[np.ndarray], inputs: InputConfig, mirrors
 ) -> BoxHeatmaps:
     """:func:`box_heatmaps` in crop mode: one crop per box (``posenet.net.inputs.build_box_crops``), every pass in
-    one U-Net batch, no (slot, view) grid of empty pairs built, run or gathered; with ``only``, the U-Net reads
-    those boxes' crops and keeps the others' for ``BoxHeatmaps.complete``."""
+    one U-Net batch, no (slot, view) grid of empty pairs built, run or gathered."""
     crops = [build_box_crops(views, boxes, inputs, mirror=m) for m in mirrors]
+    heat = model.unet_logits(crops[0].images if len(crops) == 1 else torch.cat([c.images for c in crops]))
     N = crops[0].view.shape[0]
-    if only is not None and len(only) != N:
-        raise ValueError(f"only has {len(only)} entries for {N} boxes")
-    lazy = only is not None and not only.all()
-    rows = torch.from_numpy(np.flatnonzero(only)) if lazy else None
-    images = [c.images if rows is None else c.images[rows] for c in crops]
-    heat = model.unet_logits(images[0] if len(images) == 1 else torch.cat(images))
-    n = N if rows is None else len(rows)
     index = torch.cat([torch.arange(len(np.asarray(b).reshape(-1, 4))) for b in boxes])
     passes = []
     for i, c in enumerate(crops):
-        read = aug.unflip_channels(heat[i * n : (i + 1) * n], c.flipped if rows is None else c.flipped[rows])
-        logits = read.flatten(2)  # (N, J, M), or (n, J, M) of the boxes read
-        if rows is not None:
-            logits = logits.new_zeros(N, *logits.shape[1:]).index_copy_(0, rows, logits)
+        logits = aug.unflip_channels(heat[i * N : (i + 1) * N], c.flipped).flatten(2)  # (N, J, M)
         dev = logits.device
         box = BoxPass(logits, c.uv.to(dev), c.depth.to(dev), c.valid.to(dev))
         if model.config.aggregation == "3d":  # each box's own crop pixels
             box.points = lifting.lift(c.cameras[c.view], box.uv[None], box.depth[None])[0]  # (N, M, 3)
-        if rows is not None:
-            box.ready = torch.from_numpy(np.asarray(only, bool).copy())
         passes.append(box)
-    out = BoxHeatmaps(crops[0].view, index, crops[0].cameras, passes, model.estimate, model.config.eps)
-    if lazy:
-        out._later = (crops, model.unet_logits)
-    return out
+    return BoxHeatmaps(crops[0].view, index, crops[0].cameras, passes, model.estimate, model.config.eps)

@@ -196,16 +196,12 @@ class PoseEstimator:
             )
         return pred
 
-    def box_heatmaps(
-        self, views: Sequence[SceneView], boxes: Sequence[np.ndarray], only: np.ndarray | None = None
-    ) -> BoxHeatmaps:
+    def box_heatmaps(self, views: Sequence[SceneView], boxes: Sequence[np.ndarray]) -> BoxHeatmaps:
         """The U-Net once on every box of a scene, before the boxes are grouped into persons.
 
         Args:
             views: V :class:`posenet.scene.SceneView`\\ s of one image size.
             boxes: V arrays ``(K_v, 4)`` xyxy pixels of each view (K_v may be 0).
-            only: (N,) bool over the boxes in view order: read only these now, the others when
-                ``BoxHeatmaps.complete`` asks (``posenet.net.box_poses.box_heatmaps``).
 
         Returns:
             a :class:`posenet.net.box_poses.BoxHeatmaps`: each box lifted alone (``single_view()``) or any grouping
@@ -216,4 +212,4 @@ class PoseEstimator:
             if not np.isfinite(b).all() or (b[:, 2] <= b[:, 0]).any() or (b[:, 3] <= b[:, 1]).any():
                 raise ValueError(f"view {v}: boxes must be finite xyxy with x1 > x0, y1 > y0")
         with torch.inference_mode():
-            return box_heatmaps(self.model, list(views), boxes, self.model.config.inputs, only)
+            return box_heatmaps(self.model, list(views), boxes, self.model.config.inputs)

@@ -96,39 +96,6 @@ def test_box_heatmaps_run_the_unet_once_per_box(tiny):
     assert calls == [sum(len(b) for b in boxes)]
 
 
-@pytest.mark.parametrize("model", ["crop", "crop+flip"])
-def test_boxes_read_later_give_what_reading_them_at_once_gives(tiny, model):
-    """``box_heatmaps(..., only=...)`` reads some boxes now and the rest on ``complete``: each box's skeleton alone
-    and any fusion are then those of the heatmaps read at once; before, an unread box lifts no skeleton."""
-    est = estimator(**MODELS[model])
-    views, boxes = frame(tiny[1][0])
-    full = est.box_heatmaps(views, boxes)
-    N = full.num_boxes
-    only = np.arange(N) % 3 != 1
-    calls = []
-    handle = est.model.unet.register_forward_hook(lambda _m, args, _out: calls.append(args[0].shape[0]))
-    try:
-        lazy = est.box_heatmaps(views, boxes, only=only)
-        lazy.reduce()  # moments of the boxes read, then those of the boxes read later filled in
-        assert lazy.computed().tolist() == only.tolist()
-        assert lazy.single_view().has_points.numpy().tolist() == only.tolist()
-        assert not lazy.complete(only)  # nothing new to read
-        assert lazy.complete(~only) and lazy.computed().all() and lazy.late_ms > 0
-    finally:
-        handle.remove()
-    passes = len(MODELS[model]) + 1
-    assert calls == [int(only.sum()) * passes, int((~only).sum()) * passes]
-    np.testing.assert_allclose(lazy.single_view().joints, full.single_view().joints, atol=1e-3)
-    np.testing.assert_allclose(lazy.single_view().spread_mm, full.single_view().spread_mm, atol=1e-3)
-    members = np.array([[0, N - 1], [1, -1]])
-    np.testing.assert_allclose(lazy.estimate(members).joints, full.estimate(members).joints, atol=1e-3)
-    # a box alone lies inside the bounding box of its valid lifted points (within_reach's bound)
-    for n in range(N):
-        lo, hi = full.point_bounds(n)
-        joints = full.single_view().joints[n].numpy()
-        assert ((joints >= lo - 1e-3) & (joints <= hi + 1e-3)).all()
-
-
 def _scene(rng, noise_mm=40.0):
     """Synthetic single-view skeletons: per box (view, person, skeleton, centre)."""
     at = {
@@ -354,62 +321,6 @@ def _groups(*rows):
     from pipeline.matching import Group
 
     return [Group(tuple(r), np.zeros(3), 0.0) for r in rows]
-
-
-class BoundedFusion(MeanFusion):
-    """MeanFusion whose boxes' lifted points span the given bounding boxes (lo, hi) (N, 3) each."""
-
-    def __init__(self, joints, lo, hi):
-        super().__init__(joints)
-        self.lo, self.hi = lo, hi
-
-    def point_bounds(self, box):
-        return self.lo[box], self.hi[box]
-
-
-@pytest.mark.parametrize("seed", range(20))
-def test_every_unsure_box_a_person_could_take_is_within_reach(seed):
-    """within_reach never leaves out a box that admit_candidates would give a person (random skeletons, boxes
-    whose points span their own skeleton and more), and leaves out boxes far from every person lacking its view."""
-    from pipeline.skeleton_matching import admit_candidates, within_reach
-
-    rng = np.random.default_rng(seed)
-    people = [TEMPLATE + [x, 0, z] for x, z in rng.uniform([-1500, 2500], [1500, 5000], (3, 2))]
-    # view 0: every person, sure; views 1 and 2: person 0 sure, then unsure boxes near a person or anywhere
-    skeletons, view, cand = list(people), [0, 0, 0], [False] * 3
-    for v in (1, 2):
-        skeletons.append(people[0] + rng.normal(0, 20, TEMPLATE.shape))
-        view.append(v), cand.append(False)
-        for _ in range(4):
-            near = people[rng.integers(3)] + rng.normal(0, rng.choice([30, 150, 400]), TEMPLATE.shape)
-            skeletons.append(near if rng.random() < 0.7 else TEMPLATE + rng.uniform(-3000, 6000, 3))
-            view.append(v), cand.append(True)
-    joints = np.stack(skeletons)
-    lo = joints.min(1) - rng.uniform(0, 600, (len(joints), 3))
-    hi = joints.max(1) + rng.uniform(0, 600, (len(joints), 3))
-    view, cand = np.array(view), np.array(cand)
-    boxes = [np.zeros(((view == v).sum(), 4)) for v in range(3)]
-    candidate = [cand[view == v] for v in range(3)]
-    groups = _groups((0, 0, 0), (1, -1, -1), (2, -1, -1))
-    heat = BoundedFusion(joints, lo, hi)
-    reach = within_reach(heat, groups, boxes, candidate, 300.0)
-    ok = np.ones(joints.shape[:2], bool)
-    admitted = admit_candidates(heat, groups, boxes, candidate, joints, ok, 300.0)
-    starts = np.cumsum([0] + [len(b) for b in boxes])
-    for g in admitted:
-        for v, k in enumerate(g.indices):
-            if k >= 0 and candidate[v][k]:
-                assert reach[starts[v] + k]
-    assert not reach[~cand].any()
-    # a box whose points all lie 2 m from everyone is out of reach, and so is any box when nobody lacks its view
-    far = BoundedFusion(joints, lo + [0, 0, 10_000], hi + [0, 0, 10_000])
-    assert not within_reach(far, groups, boxes, candidate, 300.0).any()
-    assert not within_reach(heat, _groups((0, 0, 0)), boxes, candidate, 300.0).any()
-    # a box whose points lie at head height only (head, neck and shoulders within 300 mm: fewer than half the
-    # joints) is out of reach too
-    slab = np.broadcast_to([[-9000.0, -750, -9000], [9000, -700, 9000]], (len(joints), 2, 3))
-    heads = BoundedFusion(joints, slab[:, 0], slab[:, 1])
-    assert not within_reach(heads, groups, boxes, candidate, 300.0).any()
 
 
 def test_unsure_boxes_complete_persons_but_never_start_one():
