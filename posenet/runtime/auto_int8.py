@@ -62,7 +62,12 @@ class Cost:
 # and the exporter): the shipped weights. The pose network's U-Net moves MPJPE, the detector AP50 (its boxes then
 # move MPJPE in detector mode, which the pose network's row already includes with reference boxes).
 KNOWN_COST = {
-    # posenet/weights/default (2026-12-07, trained with mesh bodies), 36 random-rig calibration scenes: day 4 twin
+    # posenet/weights/default (2026-12-07, fine-tuned at 64x64 crops), the same 36 scenes: day 4 twin 4.561 -> 4.592
+    # cm, alt 6.482 -> 6.507, alt-mesh 6.350 -> 6.365 (benchmarks/RESULTS.md, "64x64 crops", 2026-12-07).
+    "unet-63560a736fd45ba97c3b": Cost(
+        0.031, 0.0, "benchmarks/RESULTS.md 2026-12-07, 64x64 weights, day 4 twin, alt and alt-mesh"
+    ),
+    # the 96x96 mesh-body weights (commit 7517ca7, 2026-12-07), 36 random-rig calibration scenes: day 4 twin
     # 4.56 -> 4.57 cm, alt 6.69 -> 6.77, alt-mesh 6.69 -> 6.74 (benchmarks/RESULTS.md, "int8 for the mesh-body pose
     # weights", 2026-12-07).
     "unet-b16460610c56df806233": Cost(

@@ -182,8 +182,9 @@ def test_a_cancelled_openvino_call_leaves_the_runner_usable(tmp_path, monkeypatc
     monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
     est = PoseEstimator.from_checkpoint(None, precision="fp32", backend="openvino", threads=2)
     cfg = est.model.config
-    big = torch.randn(96, cfg.inputs.in_channels, 96, 96)
-    small = torch.randn(5, cfg.inputs.in_channels, 96, 96)
+    side = cfg.inputs.crop_size  # the shipped weights' crops; the big batch holds 96 crops' worth of 96x96 pixels
+    big = torch.randn(96 * 96 * 96 // side**2, cfg.inputs.in_channels, side, side)
+    small = torch.randn(5, cfg.inputs.in_channels, side, side)
     outcome = {}
 
     def work():
