@@ -56,10 +56,9 @@ def load(spec: str, background: bool) -> dict[str, list]:
     out = {}
     seqs = sequences(gt, detections)
     for seq, rows in seqs.items():
-        frames = [f for _, f in rows]
-        for (frame_id, _), f in zip(rows, frames, strict=True):
+        for frame_id, f in rows:
             f.views = views.get(frame_id)
-        out[data.name if len(seqs) == 1 else f"{data.name}/{seq}"] = frames
+        out[data.name if len(seqs) == 1 else f"{data.name}/{seq}"] = [f for _, f in rows]
     return out
 
 
@@ -113,18 +112,19 @@ def main(argv: list[str] | None = None) -> dict:
     args = p.parse_args(argv)
     base = tuple(s for s in args.base.split(",") if s)
     rows = [base] + [base + tuple(s for s in t.split(",") if s) for t in args.tries]
+    background = not args.no_background
+    # spawned workers load the sequences themselves (torch is not fork-safe): here only their persons, to check them
+    parallel = args.workers > 1 and len(rows) > 1
     try:
         for r in rows:
             tracker_config(list(r))
-        _load_all(args.seq, not args.no_background)
+        _load_all(args.seq, background and not parallel)
     except ValueError as err:
         p.error(str(err))
     started = time.perf_counter()
-    if (
-        args.workers > 1 and len(rows) > 1
-    ):  # spawned workers load the sequences themselves (torch is not fork-safe)
+    if parallel:
         spawn = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(args.workers, spawn, _load_all, (args.seq, not args.no_background)) as pool:
+        with ProcessPoolExecutor(args.workers, spawn, _load_all, (args.seq, background)) as pool:
             results = list(pool.map(run, rows))
     else:
         results = [run(r) for r in rows]
