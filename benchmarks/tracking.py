@@ -43,7 +43,13 @@ from posenet.skeleton import NUM_JOINTS
 
 
 def detect(
-    data: Path, gt: dict, out: Path, backend: str, threads: int | None, detector: Path | None = None
+    data: Path,
+    gt: dict,
+    out: Path,
+    backend: str,
+    threads: int | None,
+    detector: Path | None = None,
+    flip_test: bool | None = None,
 ) -> None:
     """Run the pipeline in detector mode on every frame of ``data`` and write one JSON line per frame."""
     from pipeline.track import Tracker
@@ -52,7 +58,9 @@ def detect(
     from service.streams import Stream, find_up
     from service.validation import ValidatedScene
 
-    pipe = ScenePipeline.from_checkpoints(detector_checkpoint=detector, backend=backend, threads=threads)
+    pipe = ScenePipeline.from_checkpoints(
+        detector_checkpoint=detector, backend=backend, threads=threads, flip_test=flip_test
+    )
     # The views as the service decodes them (tests/pipeline/test_parity.py): the persons equal the served ones.
     ds = read_dataset(data, gt, pipe.read_size)
     # Without a room frame in the file, the room's up comes from the floor, looked for as a stream does it (once
@@ -314,6 +322,9 @@ def main(argv: list[str] | None = None) -> dict:
     p.add_argument(
         "--detector-checkpoint", type=Path, help="the pipeline's detector (default: the shipped weights)"
     )
+    p.add_argument("--flip-test", action=argparse.BooleanOptionalAction, default=None,
+                   help="the pose network averaged with the mirrored inputs (ORPOSE_FLIP_TEST in the service; "
+                   "default: the checkpoint's setting)")  # fmt: skip
     p.add_argument("--json", type=Path, help="also write the figures here")
     p.add_argument("--births", action="store_true",
                    help="also list each confirmed track's first frames (median height along up and spread, the "
@@ -365,7 +376,8 @@ def main(argv: list[str] | None = None) -> dict:
                 figures["background_ms_mean"] = round(float(np.mean(background)), 3)
     else:
         if args.redetect or not args.detections.is_file():
-            detect(args.data, gt, args.detections, args.backend, args.threads, args.detector_checkpoint)
+            detect(args.data, gt, args.detections, args.backend, args.threads, args.detector_checkpoint,
+                   args.flip_test)  # fmt: skip
         with open(args.detections) as f:
             detections = {r["id"]: r for r in map(json.loads, f)}
         report["source"] = f"offline: {args.detections}"
