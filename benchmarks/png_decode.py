@@ -17,12 +17,12 @@ import argparse
 import importlib.util
 import io
 import json
-import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import cv2
 import numpy as np
+from posenet_speed import median_time
 from tqdm import tqdm
 
 from posenet.data.images import subsample_color, subsample_depth
@@ -52,8 +52,8 @@ def _pillow():
 def decoders() -> dict:
     """name: (colour, depth) functions of (bytes, reduce), for the service and each other decoder installed."""
     found = {"service": (lambda d, r: decode_color(d, reduce=r), lambda d, r: decode_depth(d, reduce=r))}
-    for name, make in (("imagecodecs", _imagecodecs), ("pillow", _pillow)):
-        if importlib.util.find_spec("PIL" if name == "pillow" else name) is not None:
+    for name, module, make in (("imagecodecs", "imagecodecs", _imagecodecs), ("pillow", "PIL", _pillow)):
+        if importlib.util.find_spec(module) is not None:
             found[name] = make()
     return found
 
@@ -74,13 +74,7 @@ def frame_files(data: Path, day: int, index: int) -> list[tuple[bytes, bytes]]:
 
 
 def median_ms(fn, repeats: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times) * 1e3)
+    return 1e3 * median_time(fn, repeats)
 
 
 def main(argv: list[str] | None = None) -> list[dict]:
@@ -104,13 +98,10 @@ def main(argv: list[str] | None = None) -> list[dict]:
     service_color, service_depth = found["service"]
     for color, depth in views:  # the same pixels, or no figure
         for reduce in (1, args.reduce):
+            want_color, want_depth = service_color(color, reduce), service_depth(depth, reduce)
             for name, (color_fn, depth_fn) in found.items():
-                np.testing.assert_array_equal(
-                    color_fn(color, reduce), service_color(color, reduce), err_msg=name
-                )
-                np.testing.assert_array_equal(
-                    depth_fn(depth, reduce), service_depth(depth, reduce), err_msg=name
-                )
+                np.testing.assert_array_equal(color_fn(color, reduce), want_color, err_msg=name)
+                np.testing.assert_array_equal(depth_fn(depth, reduce), want_depth, err_msg=name)
     info = machine()
     print(machine_line(info))
     sizes = [f"{len(c) // 1000}+{len(d) // 1000} KB" for c, d in views]
