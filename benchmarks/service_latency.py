@@ -22,6 +22,18 @@ server's ``/model``. To see an AVX2-only CPU on a newer one, cap torch's instruc
 not capped by these)::
 
     ATEN_CPU_CAPABILITY=avx2 ONEDNN_MAX_CPU_ISA=AVX2 python benchmarks/service_latency.py --variants torch-bf16 torch
+
+``--servers NAME=URL ...`` compares servers that are already running instead (two commits of the code, two
+settings), on the 3-person frame in detector mode, sent as recorded and at the read size. Their requests are
+interleaved, one to each server in turn (the order flipped every round), so that a shared machine's load falls on
+all of them alike: runs of one server after the other on the development host differed by up to 40 %. For two
+commits::
+
+    git worktree add /tmp/before HEAD~1
+    (cd /tmp/before && PYTHONPATH=. uvicorn service.app:app --port 8001 &)
+    uvicorn service.app:app --port 8002 &
+    python benchmarks/service_latency.py --data data/mvor_altmesh4 --servers before=http://127.0.0.1:8001 \
+        after=http://127.0.0.1:8002 --requests 150
 """
 
 from __future__ import annotations
@@ -164,6 +176,61 @@ def peak_rss_mb(pid: int) -> float:
     return float("nan")
 
 
+def interleaved(urls: dict[str, str], ds: MvorDataset, root: Path, index: int, requests: int) -> dict:
+    """``--servers``: frame ``index`` in detector mode posted to every server in turn, as recorded (PNG) and at the
+    read size (PNG), ``requests`` times each: per transport and server the client's p25 / p50 / p75 and the server's
+    stage p50s."""
+    clients = {name: httpx.Client(base_url=url, timeout=300) for name, url in urls.items()}
+    try:
+        models = {name: c.get("/model").json() for name, c in clients.items()}
+        sizes = {tuple(m["read_size"] or ()) for m in models.values()}
+        if len(sizes) != 1:
+            raise SystemExit(f"the servers read views at different sizes {sorted(sizes)}: not one frame for all")
+        from posenet.runtime.execution import machine_line
+
+        out = {"frame": ds[index].id, "machines": {n: machine_line(m["machine"]) for n, m in models.items()},
+               "runtime": {n: m["runtime"] for n, m in models.items()}, "transports": {}}  # fmt: skip
+        for transport_name, transport in (
+            ("recorded", Transport("png", "png")),
+            ("read", Transport("png", "png", read_size=read_size_of(next(iter(models.values()))))),
+        ):
+            scene, files = scene_request(ds[index], root, False, transport)
+            for c in clients.values():  # warm-up
+                post(c, scene, files)
+                post(c, scene, files)
+            got = {name: {"latency": [], **{s: [] for s in STAGES}} for name in clients}
+            order = list(clients)
+            for i in range(requests):
+                for name in order if i % 2 == 0 else order[::-1]:
+                    latency, answer = post(clients[name], scene, files)
+                    got[name]["latency"].append(latency)
+                    for s in STAGES:
+                        got[name][s].append(answer["timings"][s])
+            out["transports"][transport_name] = {
+                name: {
+                    "latency_ms": {q: pct(g["latency"], int(q[1:])) for q in ("p25", "p50", "p75")},
+                    "stages_ms_p50": {s: pct(g[s], 50) for s in STAGES},
+                    "requests": requests,
+                }
+                for name, g in got.items()
+            }
+    finally:
+        for c in clients.values():
+            c.close()
+    return out
+
+
+def format_interleaved(result: dict) -> str:
+    head = f"{'sent as':<10}{'server':<14}{'p25':>8}{'p50':>8}{'p75':>8}" + "".join(f"{s:>9}" for s in STAGES)
+    lines = [head, "-" * len(head)]
+    for transport, servers in result["transports"].items():
+        for name, r in servers.items():
+            lat, st = r["latency_ms"], r["stages_ms_p50"]
+            lines.append(f"{transport:<10}{name:<14}{lat['p25']:>8.1f}{lat['p50']:>8.1f}{lat['p75']:>8.1f}"
+                         + "".join(f"{st[s]:>9.1f}" for s in STAGES))  # fmt: skip
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
@@ -193,6 +260,10 @@ def main(argv: list[str] | None = None) -> dict:
         help="depth as the dataset stores it (png) or re-written losslessly as the renderer now writes depth "
         "(png-fast: PNG filter NONE, zlib level 3), as a camera-side writer can send it",
     )  # fmt: skip
+    parser.add_argument(
+        "--servers", nargs="+", metavar="NAME=URL",
+        help="instead of starting servers: compare these running ones, their requests interleaved (see above)",
+    )  # fmt: skip
     parser.add_argument("--out", type=Path, help="also write the results as JSON here")
     parser.add_argument(
         "--plot", type=Path,
@@ -214,6 +285,19 @@ def main(argv: list[str] | None = None) -> dict:
         ]
         plot_stages(named, args.plot)
         return {}
+    if args.servers:
+        if args.data is None:
+            raise SystemExit("--servers needs --data: the frame goes to servers that are already running")
+        urls = dict(pair.split("=", 1) for pair in args.servers)
+        ds = MvorDataset(None, args.annotations or args.data / "annotations.json")
+        result = interleaved(urls, ds, args.data, pick_frames(ds, args.data)[3], args.requests)
+        print(f"frame {result['frame']}, detector mode; client ms (p25 / p50 / p75) and server stage p50s")
+        for name, line in result["machines"].items():
+            print(f"{name}: {line}")
+        print(format_interleaved(result))
+        if args.out:
+            args.out.write_text(json.dumps(result, indent=2))
+        return result
 
     results = {"threads": args.threads, "color_format": args.color_format, "depth_format": args.depth_format,
                "variants": {}}  # fmt: skip

@@ -30,6 +30,7 @@ from detector.inputs import prepare_views
 from detector.model import DetectorConfig
 from detector.protocol import Detections
 from posenet.boxes import clip_xyxy, cxcywh_norm_to_xyxy, scale_xyxy
+from posenet.runtime.auto_int8 import FRAME_BATCH
 from posenet.runtime.execution import Precision, resolve_precision
 from posenet.runtime.graphs import Backend, OnnxRunner, export_onnx, load_runner
 
@@ -127,7 +128,10 @@ class PersonDetector:
             self._precision,
             self._calibration_inputs,
             transformer=True,
+            static_batch=True,  # a batch is one image per view: a few sizes, each compiled with fixed shapes
         )
+        if self.runner is not None:  # MVOR's three views: compiled now rather than at the first frame
+            self.runner.prepare(FRAME_BATCH["detector"])
         return self.backend
 
     def _calibration_inputs(self, runner) -> list[dict]:

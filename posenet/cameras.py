@@ -46,7 +46,9 @@ def is_rigid(T: Tensor, atol: float = 1e-4) -> Tensor:
     eye = torch.eye(3, dtype=T.dtype, device=T.device)
     bottom = torch.tensor([0, 0, 0, 1], dtype=T.dtype, device=T.device)
     ortho = (R @ R.transpose(-1, -2) - eye).abs().amax(dim=(-1, -2)) < atol
-    det = (torch.linalg.det(R) - 1).abs() < atol
+    # det R as the triple product: torch.linalg.det goes through LAPACK, whose calls on a request's path cost far
+    # more than these few multiplications when the inference runtime's threads hold the cores
+    det = ((R[..., 0, :] * torch.linalg.cross(R[..., 1, :], R[..., 2, :], dim=-1)).sum(-1) - 1).abs() < atol
     last = (T[..., 3, :] - bottom).abs().amax(dim=-1) < atol
     return ortho & det & last & torch.isfinite(T).all(dim=-1).all(dim=-1)
 

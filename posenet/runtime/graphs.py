@@ -88,6 +88,7 @@ def load_runner(
     precision: Precision,
     calibrate: Callable[[OnnxRunner], list[dict]] | None = None,
     transformer: bool = False,
+    static_batch: bool = False,
 ) -> tuple[OnnxRunner | None, Backend]:
     """The runner of ``backend`` for the graph that ``export()`` builds, or None for torch; and the backend that
     runs. Any failure of an export or a runtime falls back to torch, with the reason, so a model always runs.
@@ -96,7 +97,8 @@ def load_runner(
     a float32 ``runner`` on the calibration scenes and returns its recorded inputs (called only when the int8
     graph is not cached yet); ``transformer`` selects NNCF's scheme for attention layers. If quantizing fails,
     the float32 graph runs, and its precision's reason says why. At ``auto`` precision on OpenVINO the int8 graph
-    runs where ``posenet.runtime.auto_int8`` finds its cost on record and this machine measures it faster."""
+    runs where ``posenet.runtime.auto_int8`` finds its cost on record and this machine measures it faster.
+    ``static_batch``: :class:`OnnxRunner`'s, for every OpenVINO runner built here."""
     chosen = resolve_backend(backend, device)
     if chosen.name == "torch":
         return None, chosen
@@ -107,23 +109,29 @@ def load_runner(
             from posenet.runtime.auto_int8 import choose
 
             runner, precision = choose(
-                graph, threads, precision, functools.partial(OnnxRunner, graph, "openvino", threads, precision),
-                lambda: _int8_runner(graph, threads, calibrate, transformer),
+                graph, threads, precision,
+                functools.partial(OnnxRunner, graph, "openvino", threads, precision, static_batch),
+                lambda: _int8_runner(graph, threads, calibrate, transformer, static_batch=static_batch),
             )  # fmt: skip
             return runner, chosen
         if precision.int8 and chosen.name == "openvino":
             try:
-                return _int8_runner(graph, threads, calibrate, transformer, precision), chosen
+                return _int8_runner(graph, threads, calibrate, transformer, precision, static_batch), chosen
             except (Exception, SystemExit) as exc:  # whatever calibration raises, float32 still runs
                 log.warning("int8 quantization failed, running float32: %s", exc)
                 precision = Precision("fp32", f"int8 failed ({type(exc).__name__}: {exc}); float32")
-        return OnnxRunner(graph, chosen.name, threads, precision), chosen
+        return OnnxRunner(graph, chosen.name, threads, precision, static_batch), chosen
     except (Exception, SystemExit) as exc:  # a broken runtime must leave a working (torch) model
         return None, Backend("torch", f"{chosen.name} failed ({type(exc).__name__}: {exc}); using torch")
 
 
 def _int8_runner(
-    graph: Path, threads: int, calibrate, transformer: bool, precision: Precision | None = None
+    graph: Path,
+    threads: int,
+    calibrate,
+    transformer: bool,
+    precision: Precision | None = None,
+    static_batch: bool = False,
 ) -> OnnxRunner:
     """OpenVINO's runner of the int8 graph of ``graph`` (quantized now unless cached; ``load_runner``'s
     ``calibrate`` runs the float32 graph on the calibration scenes)."""
@@ -133,7 +141,7 @@ def _int8_runner(
     float32 = functools.partial(OnnxRunner, graph, "openvino", threads, fp32)
     precision = precision or Precision("int8", "int8")
     int8 = quantize_graph(graph, lambda: calibrate(float32()), transformer)
-    return OnnxRunner(int8, "openvino", threads, precision)
+    return OnnxRunner(int8, "openvino", threads, precision, static_batch)
 
 
 def graph_key(module: torch.nn.Module, extra: dict) -> str:
@@ -217,13 +225,23 @@ class OnnxRunner:
         threads: intra-op threads (the service's ``ORPOSE_THREADS``).
         precision: bf16 is used by OpenVINO only (ONNX Runtime's CPU provider computes float32); int8 means
             ``path`` is a quantized graph.
+        static_batch: OpenVINO compiles the graph once per batch size it is called with, each with every shape
+            fixed, instead of once with a dynamic batch (:meth:`prepare` compiles one ahead). For a graph whose
+            batch takes few values (the detector's: one image per view): its int8 graph ran 12.0 against 14.2
+            ms per 3-view frame (p50 of 400 alternating calls; AMD EPYC Zen 4, 2 threads, 2026-12-07;
+            benchmarks/RESULTS.md, "Fixed shapes for the detector"). Each new batch size costs a compilation
+            (about 1.5 s) on its first call.
     """
 
-    def __init__(self, path: str | Path, backend: str, threads: int, precision: Precision) -> None:
+    def __init__(
+        self, path: str | Path, backend: str, threads: int, precision: Precision, static_batch: bool = False
+    ) -> None:
         self.path = Path(path)
         self.backend = backend
         self.threads = threads
         self.precision = precision if backend == "openvino" else Precision("fp32", "ONNX Runtime runs fp32")
+        self.static_batch = static_batch and backend == "openvino"
+        self._static: dict[int, object] = {}  # batch size -> the graph compiled for it (static_batch)
         if backend == "onnxruntime":
             import onnxruntime as ort
 
@@ -240,21 +258,46 @@ class OnnxRunner:
         else:
             raise ValueError(f"OnnxRunner runs onnxruntime or openvino, not {backend!r}")
 
-    def _compile(self) -> None:
+    def _compile(self, batch: int | None = None):
+        """Compile the graph with its batch dynamic (``batch`` None: kept as ``_compiled``) or fixed to ``batch``
+        (returned)."""
         import openvino as ov
 
         hint = "bf16" if self.precision.bf16 else "f32"
+        model = str(self.path)
+        if batch is not None:
+            model = ov.Core().read_model(model)
+            model.reshape({
+                port.get_any_name(): ov.PartialShape([batch, *list(port.get_partial_shape())[1:]])
+                for port in model.inputs
+            })  # fmt: skip
         # No CPU pinning: the detector's and the U-Net's graphs each pin their threads to the same cores, and a
         # stream runs them at once (the front stage of frame t+1 beside the pose stage of frame t). Unpinned, a
         # 3-camera stream sent at 15 fps was answered at 13.1 against 11.9 frames/s with PNG colour (3 runs each)
         # and 14.4 against 14.1 with JPEG, lag p95 204 against 221 ms (9 runs each; medians of alternating runs,
         # AMD EPYC Zen 4, 2 cores, 2026-12-06; benchmarks/RESULTS.md); a single request's latency did not change.
-        self._compiled = ov.Core().compile_model(
-            str(self.path),
+        compiled = ov.Core().compile_model(
+            model,
             "CPU",
             {"INFERENCE_NUM_THREADS": self.threads, "INFERENCE_PRECISION_HINT": hint, "NUM_STREAMS": 1,
              "ENABLE_CPU_PINNING": False},
         )  # fmt: skip
+        if batch is None:
+            self._compiled = compiled
+        return compiled
+
+    def prepare(self, batch: int) -> None:
+        """Compile the graph for calls of ``batch`` now rather than at the first (``static_batch`` only)."""
+        if self.static_batch and batch not in self._static:
+            self._static[batch] = self._compile(batch)
+
+    def _compiled_for(self, arrays: dict[str, np.ndarray]) -> tuple[object, int | None]:
+        """The compiled graph that runs ``arrays``, and its batch size (None: the dynamic graph)."""
+        if not self.static_batch:
+            return self._compiled, None
+        batch = int(next(iter(arrays.values())).shape[0])
+        self.prepare(batch)
+        return self._static[batch], batch
 
     def __call__(self, **inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """Run on named inputs; inputs that the graph does not use (pruned by the export) are ignored."""
@@ -277,11 +320,12 @@ class OnnxRunner:
             finally:
                 _stoppers.pop(thread, None)
         else:
-            compiled = self._compiled
-            request = getattr(self._local, "request", None)
-            if request is None or getattr(self._local, "compiled", None) is not compiled:
-                request = self._local.request = compiled.create_infer_request()
-                self._local.compiled = compiled
+            compiled, batch = self._compiled_for(arrays)
+            requests = self._local.__dict__.setdefault("requests", {})  # batch -> (compiled, its request)
+            held = requests.get(batch)
+            if held is None or held[0] is not compiled:
+                held = requests[batch] = (compiled, compiled.create_infer_request())
+            request = held[1]
             # Asynchronous start and wait rather than infer(): only an asynchronous request can be cancelled.
             _stoppers[thread] = request.cancel
             try:
@@ -297,8 +341,11 @@ class OnnxRunner:
                     request.wait()
                 except Exception:
                     pass
-                self._local.request = None
-                self._compile()
+                requests.pop(batch, None)
+                if batch is None:
+                    self._compile()
+                else:
+                    self._static.pop(batch, None)
                 raise
             finally:
                 _stoppers.pop(thread, None)

@@ -19,6 +19,7 @@ from posenet.rig.check import (
     depth_agreement,
     depth_checks,
     floor_of_frame,
+    median_depth,
     sanity_checks,
 )
 from posenet.rig.geometry import check_direction
@@ -257,6 +258,26 @@ def test_depth_agreement_finds_a_miscalibrated_camera(mvor_file):
     assert bad[(0, 2)]["median_abs_mm"] > 30 and bad[(2, 0)]["within"] < 0.7
     per_camera = camera_agreement(pairs, 3)
     assert per_camera[2] == min(per_camera)  # the moved camera is the odd one out
+    # every ordered pair once, in order; each pair's figures are those of the two views alone
+    assert [r["pair"] for r in pairs] == [(0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1)]
+    for i, j in ((0, 2), (2, 1)):
+        alone = depth_agreement(Rig([moved.cameras[i], moved.cameras[j]], ["a", "b"]), [depths[i], depths[j]], 2)
+        assert {**alone[0], "pair": (i, j)} == bad[(i, j)] and {**alone[1], "pair": (j, i)} == bad[(j, i)]
+    blind = [depths[0], np.zeros_like(depths[1]), depths[2]]  # a view without valid depth: no points of its own
+    pairs = {r["pair"]: r for r in depth_agreement(small, blind, stride=2)}
+    assert list(pairs) == [(0, 1), (0, 2), (2, 0), (2, 1)] and pairs[0, 1]["overlap"] == pairs[2, 1]["overlap"] == 0
+
+
+def test_median_depth_is_numpys_median_of_the_valid_pixels():
+    rng = np.random.default_rng(0)
+    for shape in ((1, 1), (2, 2), (3, 5), (48, 64)):
+        for _ in range(20):
+            d = rng.integers(0, 9000, shape).astype(np.uint16)
+            d[rng.random(shape) < 0.3] = 0
+            valid = d[d > 0]
+            assert median_depth(d)[0] == (float(np.median(valid)) if valid.size else None)
+    assert median_depth(np.zeros((4, 4), np.uint16)) == (None, False)
+    assert median_depth(np.full((4, 4), 20_000, np.uint16)) == (20_000.0, False)  # beyond 15 m: not mm?
 
 
 def test_floor_is_found_in_the_depth_frames(mvor_file):

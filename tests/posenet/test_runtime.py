@@ -170,17 +170,22 @@ def test_model_route_says_how_each_network_runs_and_on_what(tmp_path, precision)
 
 
 @pytest.mark.skipif(not installed("openvino"), reason="openvino is not installed")
-def test_a_cancelled_openvino_call_leaves_the_runner_usable(tmp_path, monkeypatch):
+@pytest.mark.parametrize("static_batch", [False, True])
+def test_a_cancelled_openvino_call_leaves_the_runner_usable(tmp_path, monkeypatch, static_batch):
     """OpenVINO 2026.4 keeps a cancelled run's shapes: the next run at another batch size failed shape inference
-    (Concat {96,...} against {5,...}) until the runner compiled its graph afresh after a cancel."""
+    (Concat {96,...} against {5,...}) until the runner compiled its graph afresh after a cancel. A runner compiled
+    per batch size (``static_batch``) drops the cancelled batch's graph."""
     import threading
     import time
 
     from posenet.net.infer import PoseEstimator
-    from posenet.runtime.graphs import stop_call
+    from posenet.runtime.graphs import OnnxRunner, stop_call
 
     monkeypatch.setenv("ORPOSE_CACHE_DIR", str(tmp_path))
     est = PoseEstimator.from_checkpoint(None, precision="fp32", backend="openvino", threads=2)
+    if static_batch:
+        runner = est.model.runner
+        est.model.runner = OnnxRunner(runner.path, "openvino", 2, runner.precision, static_batch=True)
     cfg = est.model.config
     side = cfg.inputs.crop_size  # the shipped weights' crops; the big batch holds 96 crops' worth of 96x96 pixels
     big = torch.randn(96 * 96 * 96 // side**2, cfg.inputs.in_channels, side, side)
@@ -274,3 +279,32 @@ def test_int8_graphs_are_calibrated_once_and_stay_near_float32(example_frame, tm
         if backend != "openvino":
             other = ScenePipeline.from_checkpoints(precision="int8", backend=backend, threads=2)
             assert other.pose.precision.name == other.detector.precision.name == "fp32"
+
+
+@pytest.mark.skipif(not installed("openvino"), reason="openvino is not installed")
+def test_the_detector_graph_compiled_per_batch_size_finds_what_the_dynamic_graph_finds(example_frame, cache):
+    """The detector's OpenVINO graph is compiled once per batch size with every shape fixed (``static_batch``),
+    the frame's batch at load: its boxes and scores are the dynamic-batch graph's, at each number of views."""
+    from detector.infer import PersonDetector
+    from posenet.runtime.auto_int8 import FRAME_BATCH
+    from posenet.runtime.graphs import OnnxRunner
+
+    detect, _ = example_frame
+    det = PersonDetector.from_checkpoint(None, precision="fp32", backend="openvino", threads=2)
+    fixed = det.runner
+    assert fixed.static_batch and set(fixed._static) == {FRAME_BATCH["detector"]}
+    dynamic = OnnxRunner(fixed.path, "openvino", 2, fixed.precision)
+    assert not dynamic.static_batch and dynamic._compiled.inputs[0].get_partial_shape().is_dynamic
+    views = detect.views
+    for n in (1, 3, 2):
+        colors, depths = [v.color for v in views[:n]], [v.depth for v in views[:n]]
+        det.runner = dynamic
+        want = det.detect(colors, depths, score_threshold=0.25)
+        det.runner = fixed
+        got = det.detect(colors, depths, score_threshold=0.25)
+        assert len(got) == n and sum(len(d.boxes) for d in want) > 0
+        for a, b in zip(want, got, strict=True):
+            np.testing.assert_allclose(b.boxes, a.boxes, atol=0.5)  # pixels
+            np.testing.assert_allclose(b.scores, a.scores, atol=1e-3)
+        assert fixed._static[n].inputs[0].get_partial_shape().is_static
+    assert set(fixed._static) == {1, 2, 3}
