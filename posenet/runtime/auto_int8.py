@@ -105,11 +105,9 @@ def _batch(runner) -> dict[str, np.ndarray]:
     name = runner.path.stem.split("-")[0]
     rng = np.random.default_rng(0)
     out = {}
-    for port in runner._compiled.inputs:
-        shape = [
-            FRAME_BATCH.get(name, 4) if d.is_dynamic else d.get_length() for d in port.get_partial_shape()
-        ]
-        out[port.get_any_name()] = rng.standard_normal(shape).astype(np.float32)
+    for port, dims in runner.input_shapes.items():
+        shape = [FRAME_BATCH.get(name, 4) if d is None else d for d in dims]
+        out[port] = rng.standard_normal(shape).astype(np.float32)
     return out
 
 

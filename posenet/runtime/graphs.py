@@ -202,6 +202,10 @@ def export_onnx(
     return path
 
 
+# The batch sizes that an OnnxRunner(static_batch=True) compiles at fixed shapes: a rig's views, and one camera
+# fewer. Each is a copy of the graph in memory (OnnxRunner).
+MAX_STATIC_BATCHES = 2
+
 # A call that a thread is running, and how to end it early from another thread (it then raises in the caller):
 # the service stops the work of a client that has disconnected (service/cancel.py).
 _stoppers: dict[int, Callable[[], object]] = {}
@@ -230,7 +234,9 @@ class OnnxRunner:
             batch takes few values (the detector's: one image per view): its int8 graph ran 12.0 against 14.2
             ms per 3-view frame (p50 of 400 alternating calls; AMD EPYC Zen 4, 2 threads, 2026-12-07;
             benchmarks/RESULTS.md, "Fixed shapes for the detector"). Each new batch size costs a compilation
-            (about 1.5 s) on its first call.
+            (1.1-1.9 s) on its first call and holds its own copy of the graph (73 MB for the detector's int8
+            graph), so only the first ``MAX_STATIC_BATCHES`` batch sizes are compiled so; any other runs on the
+            graph with a dynamic batch, compiled when first needed.
     """
 
     def __init__(
@@ -252,8 +258,15 @@ class OnnxRunner:
             self._session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
             self.input_names = [i.name for i in self._session.get_inputs()]
         elif backend == "openvino":
-            self._compile()
-            self.input_names = [p.get_any_name() for p in self._compiled.inputs]
+            import openvino as ov
+
+            # the inputs' names and shapes (None: a dynamic dimension), as the graph declares them
+            self.input_shapes = {
+                port.get_any_name(): [d.get_length() if d.is_static else None for d in port.get_partial_shape()]
+                for port in ov.Core().read_model(str(self.path)).inputs
+            }
+            self.input_names = list(self.input_shapes)
+            self._compiled = None if self.static_batch else self._compile()  # the dynamic-batch graph
             self._local = threading.local()  # an infer request per thread: requests are not thread-safe
         else:
             raise ValueError(f"OnnxRunner runs onnxruntime or openvino, not {backend!r}")
@@ -287,17 +300,21 @@ class OnnxRunner:
         return compiled
 
     def prepare(self, batch: int) -> None:
-        """Compile the graph for calls of ``batch`` now rather than at the first (``static_batch`` only)."""
-        if self.static_batch and batch not in self._static:
+        """Compile the graph for calls of ``batch`` now rather than at the first (``static_batch`` only, within
+        ``MAX_STATIC_BATCHES``)."""
+        if self.static_batch and batch not in self._static and len(self._static) < MAX_STATIC_BATCHES:
             self._static[batch] = self._compile(batch)
 
     def _compiled_for(self, arrays: dict[str, np.ndarray]) -> tuple[object, int | None]:
         """The compiled graph that runs ``arrays``, and its batch size (None: the dynamic graph)."""
-        if not self.static_batch:
-            return self._compiled, None
-        batch = int(next(iter(arrays.values())).shape[0])
-        self.prepare(batch)
-        return self._static[batch], batch
+        if self.static_batch:
+            batch = int(next(iter(arrays.values())).shape[0])
+            self.prepare(batch)
+            if batch in self._static:
+                return self._static[batch], batch
+        if self._compiled is None:
+            self._compile()
+        return self._compiled, None
 
     def __call__(self, **inputs: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """Run on named inputs; inputs that the graph does not use (pruned by the export) are ignored."""

@@ -283,18 +283,21 @@ def test_int8_graphs_are_calibrated_once_and_stay_near_float32(example_frame, tm
 
 @pytest.mark.skipif(not installed("openvino"), reason="openvino is not installed")
 def test_the_detector_graph_compiled_per_batch_size_finds_what_the_dynamic_graph_finds(example_frame, cache):
-    """The detector's OpenVINO graph is compiled once per batch size with every shape fixed (``static_batch``),
-    the frame's batch at load: its boxes and scores are the dynamic-batch graph's, at each number of views."""
+    """The detector's OpenVINO graph is compiled with every shape fixed for its first ``MAX_STATIC_BATCHES`` batch
+    sizes (``static_batch``; the frame's batch at load), other batch sizes run the dynamic-batch graph, compiled
+    when first needed: the boxes and scores are the dynamic graph's at each number of views."""
     from detector.infer import PersonDetector
     from posenet.runtime.auto_int8 import FRAME_BATCH
-    from posenet.runtime.graphs import OnnxRunner
+    from posenet.runtime.graphs import MAX_STATIC_BATCHES, OnnxRunner
 
+    assert MAX_STATIC_BATCHES == 2
     detect, _ = example_frame
     det = PersonDetector.from_checkpoint(None, precision="fp32", backend="openvino", threads=2)
     fixed = det.runner
-    assert fixed.static_batch and set(fixed._static) == {FRAME_BATCH["detector"]}
+    assert fixed.static_batch and set(fixed._static) == {FRAME_BATCH["detector"]} and fixed._compiled is None
     dynamic = OnnxRunner(fixed.path, "openvino", 2, fixed.precision)
     assert not dynamic.static_batch and dynamic._compiled.inputs[0].get_partial_shape().is_dynamic
+    assert fixed.input_shapes == dynamic.input_shapes and fixed.input_shapes["pixel_values"][0] is None
     views = detect.views
     for n in (1, 3, 2):
         colors, depths = [v.color for v in views[:n]], [v.depth for v in views[:n]]
@@ -306,5 +309,5 @@ def test_the_detector_graph_compiled_per_batch_size_finds_what_the_dynamic_graph
         for a, b in zip(want, got, strict=True):
             np.testing.assert_allclose(b.boxes, a.boxes, atol=0.5)  # pixels
             np.testing.assert_allclose(b.scores, a.scores, atol=1e-3)
-        assert fixed._static[n].inputs[0].get_partial_shape().is_static
-    assert set(fixed._static) == {1, 2, 3}
+    assert set(fixed._static) == {3, 1} and all(g.inputs[0].get_partial_shape().is_static for g in fixed._static.values())
+    assert fixed._compiled is not None and fixed._compiled.inputs[0].get_partial_shape().is_dynamic  # 2 views
