@@ -1,5 +1,5 @@
 """PNG decoding of a served frame: the service's decoders (OpenCV, ``service.decode``) against other PNG decoders
-that give the same pixels (imagecodecs' libpng, Pillow; each where it is installed).
+that give the same pixels (imagecodecs' libpng, Pillow, Wuffs through pywuffs; each where it is installed).
 
     python benchmarks/png_decode.py --data data/mvor_altmesh4 --day 4 --index 2 [--repeats 30] [--json OUT]
 
@@ -17,6 +17,7 @@ import argparse
 import importlib.util
 import io
 import json
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -39,6 +40,34 @@ def _imagecodecs():
     )
 
 
+def _wuffs():
+    from pywuffs import ImageDecoderType, PixelFormat
+    from pywuffs.aux import ImageDecoder, ImageDecoderConfig
+
+    def decoder(pixel_format):
+        config = ImageDecoderConfig()
+        config.enabled_decoders = [ImageDecoderType.PNG]
+        config.pixel_format = pixel_format
+        return ImageDecoder(config)
+
+    local = threading.local()  # a decoder per thread: the frame is decoded on a pool
+
+    def decode(data: bytes, pixel_format) -> np.ndarray:
+        decoders = local.__dict__.setdefault("decoders", {})
+        if pixel_format not in decoders:
+            decoders[pixel_format] = decoder(pixel_format)
+        return decoders[pixel_format].decode(data).pixbuf
+
+    def depth(data: bytes) -> np.ndarray:
+        pixels = decode(data, PixelFormat.Y_16LE)  # (H, W, 2) bytes of little-endian uint16
+        return pixels.view("<u2").reshape(pixels.shape[:2])
+
+    return (
+        lambda d, r: subsample_color(decode(d, PixelFormat.RGB), r),
+        lambda d, r: subsample_depth(depth(d), r),
+    )
+
+
 def _pillow():
     from PIL import Image
 
@@ -52,7 +81,9 @@ def _pillow():
 def decoders() -> dict:
     """name: (colour, depth) functions of (bytes, reduce), for the service and each other decoder installed."""
     found = {"service": (lambda d, r: decode_color(d, reduce=r), lambda d, r: decode_depth(d, reduce=r))}
-    for name, module, make in (("imagecodecs", "imagecodecs", _imagecodecs), ("pillow", "PIL", _pillow)):
+    for name, module, make in (
+        ("imagecodecs", "imagecodecs", _imagecodecs), ("pillow", "PIL", _pillow), ("wuffs", "pywuffs", _wuffs),
+    ):  # fmt: skip
         if importlib.util.find_spec(module) is not None:
             found[name] = make()
     return found
