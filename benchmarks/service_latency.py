@@ -189,6 +189,7 @@ def interleaved(urls: dict[str, str], ds: MvorDataset, root: Path, index: int, r
         from posenet.runtime.execution import machine_line
 
         out = {"frame": ds[index].id, "machines": {n: machine_line(m["machine"]) for n, m in models.items()},
+               "machine": {n: m["machine"] for n, m in models.items()},
                "runtime": {n: m["runtime"] for n, m in models.items()}, "transports": {}}  # fmt: skip
         for transport_name, transport in (
             ("recorded", Transport("png", "png")),
@@ -218,6 +219,16 @@ def interleaved(urls: dict[str, str], ds: MvorDataset, root: Path, index: int, r
         for c in clients.values():
             c.close()
     return out
+
+
+def plot_interleaved(result: dict, out: Path) -> None:
+    """``--servers --plot``: :func:`plot_stages`' bars, one per transport and server."""
+    rows = [
+        (f"{name}, {transport}", {"model": {"machine": result["machine"][name]}, "configs": {"3p_detector": r}})
+        for transport, servers in result["transports"].items()
+        for name, r in servers.items()
+    ]
+    plot_stages(rows, out)
 
 
 def format_interleaved(result: dict) -> str:
@@ -267,7 +278,8 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--out", type=Path, help="also write the results as JSON here")
     parser.add_argument(
         "--plot", type=Path,
-        help="also draw the variants' 3-person detector frame as stacked server stages beside the client p50 (PNG)",
+        help="also draw the variants' 3-person detector frame as stacked server stages beside the client p50 (PNG; "
+        "with --servers one bar per transport and server)",
     )  # fmt: skip
     parser.add_argument(
         "--replot", type=Path, nargs="+", metavar="JSON",
@@ -295,6 +307,8 @@ def main(argv: list[str] | None = None) -> dict:
         for name, line in result["machines"].items():
             print(f"{name}: {line}")
         print(format_interleaved(result))
+        if args.plot:
+            plot_interleaved(result, args.plot)
         if args.out:
             args.out.write_text(json.dumps(result, indent=2))
         return result

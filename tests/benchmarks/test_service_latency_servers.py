@@ -11,7 +11,7 @@ from conftest import write_tiny_mvor
 from service_harness import Server, tiny_checkpoints
 
 sys.path.insert(0, str(Path(__file__).parents[2] / "benchmarks"))
-from service_latency import STAGES, format_interleaved, interleaved, main  # noqa: E402
+from service_latency import STAGES, format_interleaved, interleaved, main, plot_interleaved  # noqa: E402
 
 from posenet.data.mvor import MvorDataset  # noqa: E402
 
@@ -34,6 +34,8 @@ def test_servers_are_compared_request_by_request_on_both_transports(tmp_path):
             assert set(r["stages_ms_p50"]) == set(STAGES) and r["stages_ms_p50"]["total"] > 0
     table = format_interleaved(result)
     assert len(table.splitlines()) == 2 + 4 and "read" in table and "recorded" in table
+    plot_interleaved(result, tmp_path / "stages.png")
+    assert (tmp_path / "stages.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_servers_need_the_frame_to_send():
