@@ -186,10 +186,7 @@ def interleaved(urls: dict[str, str], ds: MvorDataset, root: Path, index: int, r
         sizes = {tuple(m["read_size"] or ()) for m in models.values()}
         if len(sizes) != 1:
             raise SystemExit(f"the servers read views at different sizes {sorted(sizes)}: not one frame for all")
-        from posenet.runtime.execution import machine_line
-
-        out = {"frame": ds[index].id, "machines": {n: machine_line(m["machine"]) for n, m in models.items()},
-               "machine": {n: m["machine"] for n, m in models.items()},
+        out = {"frame": ds[index].id, "machines": {n: m["machine"] for n, m in models.items()},
                "runtime": {n: m["runtime"] for n, m in models.items()}, "transports": {}}  # fmt: skip
         for transport_name, transport in (
             ("recorded", Transport("png", "png")),
@@ -224,7 +221,7 @@ def interleaved(urls: dict[str, str], ds: MvorDataset, root: Path, index: int, r
 def plot_interleaved(result: dict, out: Path) -> None:
     """``--servers --plot``: :func:`plot_stages`' bars, one per transport and server."""
     rows = [
-        (f"{name}, {transport}", {"model": {"machine": result["machine"][name]}, "configs": {"3p_detector": r}})
+        (f"{name}, {transport}", {"model": {"machine": result["machines"][name]}, "configs": {"3p_detector": r}})
         for transport, servers in result["transports"].items()
         for name, r in servers.items()
     ]
@@ -304,8 +301,10 @@ def main(argv: list[str] | None = None) -> dict:
         ds = MvorDataset(None, args.annotations or args.data / "annotations.json")
         result = interleaved(urls, ds, args.data, pick_frames(ds, args.data)[3], args.requests)
         print(f"frame {result['frame']}, detector mode; client ms (p25 / p50 / p75) and server stage p50s")
-        for name, line in result["machines"].items():
-            print(f"{name}: {line}")
+        from posenet.runtime.execution import machine_line
+
+        for name, info in result["machines"].items():
+            print(f"{name}: {machine_line(info)}")
         print(format_interleaved(result))
         if args.plot:
             plot_interleaved(result, args.plot)

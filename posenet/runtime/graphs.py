@@ -260,13 +260,15 @@ class OnnxRunner:
         elif backend == "openvino":
             import openvino as ov
 
-            # the inputs' names and shapes (None: a dynamic dimension), as the graph declares them
+            self._compiled = None  # the dynamic-batch graph: compiled now, or with static_batch when first needed
+            # the inputs as the graph declares them: from the compiled graph, or the file when nothing is compiled yet
+            ports = ov.Core().read_model(str(self.path)).inputs if self.static_batch else self._compile().inputs
+            # names and shapes (None: a dynamic dimension)
             self.input_shapes = {
                 port.get_any_name(): [d.get_length() if d.is_static else None for d in port.get_partial_shape()]
-                for port in ov.Core().read_model(str(self.path)).inputs
+                for port in ports
             }
             self.input_names = list(self.input_shapes)
-            self._compiled = None if self.static_batch else self._compile()  # the dynamic-batch graph
             self._local = threading.local()  # an infer request per thread: requests are not thread-safe
         else:
             raise ValueError(f"OnnxRunner runs onnxruntime or openvino, not {backend!r}")
