@@ -4,7 +4,7 @@
         --sets data/mvor_twin4:4 data/mvor_alt4:4 data/mvor_altmesh4:4 data/seq_h43 data/seq_h45 --json out.json
 
 MVOR's day 4 alone, with 2-4 large people per view, can make a detector look better than it is: fine-tuned at input
-width 128, the shipped detector gained AP50 there and lost 0.01-0.04 on the tracking sequences' frames, where 4-5
+width 128, the shipped detector gained AP50 there and lost 0.005-0.042 on the tracking sequences' frames, where 4-5
 people walk and stand close, and the tracker lost identities with it (docs/detector.md, "Fine-tuned at input width
 128"). So detectors are compared on the sets that matter in one run: day 4 of each look and the tracking sequences.
 
@@ -44,17 +44,21 @@ def parse_set(text: str) -> tuple[Path, list[int] | None]:
 
 
 def score_sets(detectors: dict, sets: list[tuple[Path, list[int] | None]], progress: bool = True) -> dict:
-    """{set: {detector: {"AP50", "AP", "views"}}} of every detector on every set."""
+    """{set: {detector: {"AP50", "AP", "views"}}} of every detector on every set; a set is named by its folder and
+    days (by its path where two folders share a name)."""
     from detector.data import load_records
     from detector.evaluate import coco_ap
     from detector.predict import predict_records
 
+    days_of = ["" if days is None else f":{','.join(map(str, days))}" for _, days in sets]
+    keys = [root.name + d for (root, _), d in zip(sets, days_of, strict=True)]
+    if len(set(keys)) < len(keys):  # sets in folders of the same name: their paths tell them apart
+        keys = [str(root) + d for (root, _), d in zip(sets, days_of, strict=True)]
     out = {}
-    for root, days in sets:
+    for (root, days), key in zip(sets, keys, strict=True):
         records = load_records(root / "annotations.json", days)
         if not records:
             raise SystemExit(f"{root}: no views on days {days}")
-        key = root.name + ("" if days is None else f":{','.join(map(str, days))}")
         out[key] = {}
         for name, detector in detectors.items():
             results = predict_records(detector, records, root, progress=progress)

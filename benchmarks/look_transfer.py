@@ -46,17 +46,15 @@ def pose_rows(args) -> list[dict]:
 
 def detector_rows(args) -> list[dict]:
     """AP50 and AP of one detector on the held-out day of both looks."""
-    from detector.data import load_records
-    from detector.evaluate import evaluate_file
-    from detector.infer import PersonDetector
-    from detector.predict import predict_records
+    from detector_sets import score_sets
 
-    detector = PersonDetector.from_checkpoint(args.detector)
-    scores = {}
-    for look, root in (("in", args.data), ("cross", args.cross)):
-        annotations = root / "annotations.json"
-        results = predict_records(detector, load_records(annotations, [args.holdout_day]), root)
-        scores[look] = evaluate_file(annotations, results, [args.holdout_day])
+    from detector.infer import PersonDetector
+
+    detector = {"detector": PersonDetector.from_checkpoint(args.detector)}
+    scores = {
+        look: next(iter(score_sets(detector, [(root, [args.holdout_day])]).values()))["detector"]
+        for look, root in (("in", args.data), ("cross", args.cross))
+    }
     return [
         {"model": f"detector ({args.detector or 'shipped'})", "metric": metric, "in_look": scores["in"][metric],
          "cross_look": scores["cross"][metric], "ratio": scores["cross"][metric] / scores["in"][metric]}

@@ -79,3 +79,15 @@ def test_bad_arguments_are_named(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main(["--detectors", "x=a", "x=b", "--sets", str(tmp_path)])
     assert e.value.code == 2 and "its own name" in capsys.readouterr().err
+
+
+def test_sets_in_folders_of_the_same_name_stay_apart(tmp_path):
+    from detector_sets import score_sets
+
+    one, other = (
+        write_tiny_mvor(tmp_path / "a" / "tiny").root,
+        write_tiny_mvor(tmp_path / "b" / "tiny", seed=1).root,
+    )
+    detector = {"a": PersonDetector.from_checkpoint(tiny_checkpoint(tmp_path / "ck", 0), precision="fp32")}
+    scores = score_sets(detector, [(one, [2]), (other, [2])], progress=False)
+    assert list(scores) == [f"{one}:2", f"{other}:2"]
