@@ -36,7 +36,17 @@ import numpy as np
 from tqdm import tqdm
 
 from pipeline.track import Tracker, TrackerConfig, mean_joint_distance, skeleton_height
-from pipeline.track_eval import GOALS, SequenceFrame, TrackedPerson, breakdown, evaluate, goal_lines, score
+from pipeline.track_eval import (
+    GOALS,
+    SequenceFrame,
+    TrackedPerson,
+    breakdown,
+    evaluate,
+    goal_lines,
+    run_tracker,
+    score,
+    switches,
+)
 from posenet.data.mvor import load_annotations, pose_joints, room_up
 from posenet.runtime.execution import machine_line
 from posenet.skeleton import NUM_JOINTS
@@ -293,6 +303,19 @@ def births(frames: list[SequenceFrame], tracker: Tracker, near_mm: float = 500.0
     return out
 
 
+def print_switches(seq, events: list[dict]) -> list[dict]:
+    """Print a sequence's id switches (:func:`pipeline.track_eval.switches`), one line each, and return them."""
+    for e in events:
+        was = "a new track" if e["to_track_was"] is None else f"the track of person {e['to_track_was']}"
+        gap = (
+            "" if e["unmatched_frames"] is None else f", after {e['unmatched_frames']} frames without a track"
+        )
+        old = "still reported" if e["from_track_reported"] else "not reported"
+        print(f"sequence {seq} frame {e['frame']} ({e['time_s']} s): person {e['person']}, track {e['from_track']} -> "
+              f"{e['to_track']} ({was}{gap}; track {e['from_track']} {old})")  # fmt: skip
+    return events
+
+
 def main(argv: list[str] | None = None) -> dict:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], epilog=__doc__.split("\n\n", 1)[1],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)  # fmt: skip
@@ -339,6 +362,9 @@ def main(argv: list[str] | None = None) -> dict:
                    help="also say where the person-frames without a track go (no skeleton, a neighbour's skeleton, "
                    "the tracker's filters, tentative tracks, the duplicate rule, ...) and what the false positives are "
                    "(pipeline.track_eval.breakdown; offline tracking)")  # fmt: skip
+    p.add_argument("--switches", action="store_true",
+                   help="also list each id switch: the person, the track it had and the one it took, whom that track "
+                   "followed before, and how long the person went without a track first (pipeline.track_eval.switches)")  # fmt: skip
     p.add_argument("--background", action="store_true",
                    help="give the tracker each frame's depth images and cameras (offline tracking), as a stream "
                    "does: it learns the room's static depth and confirms no track on what never moved "
@@ -371,6 +397,8 @@ def main(argv: list[str] | None = None) -> dict:
         for seq, rows in sequences(gt).items():
             hyps, ms = zip(*(served_tracks(lines, frame_id) for frame_id, _ in rows), strict=True)
             report["sequences"][seq] = figures = score([f for _, f in rows], list(hyps), list(ms))
+            if args.switches:
+                figures["switch_events"] = print_switches(seq, switches([f for _, f in rows], list(hyps)))
             background = [lines[i]["response"]["timings"].get("background") for i, _ in rows]
             if all(b is not None for b in background):  # answered since timings.background exists
                 figures["background_ms_mean"] = round(float(np.mean(background)), 3)
@@ -407,6 +435,11 @@ def main(argv: list[str] | None = None) -> dict:
                 print("  false positives (confirmed track-frames on no annotated person):")
                 for name, n in b["false_positives"].items():
                     print(f"  {n:>5}  {name}")
+            if args.switches:
+                hyps, _ = run_tracker([f for _, f in rows], Tracker(config))
+                report["sequences"][seq]["switch_events"] = print_switches(
+                    seq, switches([f for _, f in rows], hyps)
+                )
             if args.births:
                 report["sequences"][seq]["births"] = rows_of = births([f for _, f in rows], Tracker(config))
                 for b in rows_of:

@@ -238,15 +238,10 @@ def evaluate(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GAT
     return figures
 
 
-def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_mm: float = GATE_MM) -> dict:
-    """Measure tracks against the ground truth (module docstring).
-
-    Args:
-        frames: the sequence in time order (only the ground truth and the time are read).
-        hyps: per frame, ``{track_id: person}`` of the confirmed tracks; a person has ``raw`` and ``joints``
-            (smoothed), (J, 3) mm: :func:`run_tracker`'s, or :class:`TrackedPerson` s of a served stream.
-        ms: the tracker's milliseconds per frame.
-    """
+def _accumulate(frames: list[SequenceFrame], hyps: list[dict], gate_mm: float):
+    """The ``motmetrics`` accumulator of ``hyps`` (per frame ``{track_id: person}``) against ``frames``' ground
+    truth under the gate, the frames' tracks as scored (those on persons the ground truth leaves out dropped) and
+    how many were dropped."""
     try:
         import motmetrics as mm  # imported here: pandas takes a while, and only the evaluation needs it
     except ImportError as exc:
@@ -267,6 +262,44 @@ def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_m
         smoothed = np.array([p.joints for p in confirmed]).reshape(len(confirmed), NUM_JOINTS, 3)
         dist = mean_joint_distance(fr.gt_joints.reshape(-1, NUM_JOINTS, 3), smoothed)  # (G, H)
         acc.update(fr.gt_ids.tolist(), list(hyp), np.where(dist <= gate_mm, dist, np.nan))
+    return acc, kept, ignored
+
+
+def switches(frames: list[SequenceFrame], hyps: list[dict], gate_mm: float = GATE_MM) -> list[dict]:
+    """Each id switch that :func:`score` counts (``motmetrics``' SWITCH events), with what led to it: the frame
+    and its time, the ``person``, the track it had (``from_track``) and the one it has now (``to_track``), whom
+    ``to_track`` followed before (``to_track_was``: a person id, or None for a track new to the evaluation), whether
+    ``from_track`` is still reported in that frame (on someone else, or on nobody), and for how many frames before
+    it the person had no track (``unmatched_frames``: a lost track and a new one, against a swap on the spot)."""
+    acc, _, _ = _accumulate(frames, hyps, gate_mm)
+    out, track_of, person_of, last_frame = [], {}, {}, {}
+    for (f, _), ev in acc.mot_events.iterrows():
+        if ev["Type"] not in ("MATCH", "SWITCH"):
+            continue
+        person, track = int(ev["OId"]), int(ev["HId"])
+        if ev["Type"] == "SWITCH":
+            out.append({
+                "frame": int(f), "time_s": round(float(frames[f].timestamp_s), 3), "person": person,
+                "from_track": track_of.get(person), "to_track": track, "to_track_was": person_of.get(track),
+                "from_track_reported": track_of.get(person) in hyps[f],
+                "unmatched_frames": int(f - last_frame[person] - 1) if person in last_frame else None,
+            })  # fmt: skip
+        track_of[person], person_of[track], last_frame[person] = track, person, int(f)
+    return out
+
+
+def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_mm: float = GATE_MM) -> dict:
+    """Measure tracks against the ground truth (module docstring).
+
+    Args:
+        frames: the sequence in time order (only the ground truth and the time are read).
+        hyps: per frame, ``{track_id: person}`` of the confirmed tracks; a person has ``raw`` and ``joints``
+            (smoothed), (J, 3) mm: :func:`run_tracker`'s, or :class:`TrackedPerson` s of a served stream.
+        ms: the tracker's milliseconds per frame.
+    """
+    acc, kept, ignored = _accumulate(frames, hyps, gate_mm)
+    import motmetrics as mm
+
     mh = mm.metrics.create()
     summary = mh.compute(acc, metrics=["mota", "idf1", "num_switches", "num_objects", "num_false_positives",
                                        "num_misses", "num_frames"], name="s")  # fmt: skip

@@ -123,3 +123,44 @@ def test_breakdown_gives_every_untracked_person_frame_and_false_track_its_reason
     assert out["tracked"] + sum(out["missed"].values()) == out["person_frames"]
     # the ghost's track from its third frame; the unannotated person's track is left out, as in the evaluation
     assert out["false_positives"] == {**dict.fromkeys(FALSE, 0), "on nobody": 8}
+
+
+def test_switches_tell_a_swap_on_the_spot_from_a_lost_track_and_a_new_one(monkeypatch, capsys):
+    import sys
+    from pathlib import Path
+
+    from pipeline.track_eval import switches
+
+    monkeypatch.syspath_prepend(str(Path(__file__).parents[2] / "benchmarks"))
+    sys.modules.pop("tracking", None)
+    from tracking import print_switches
+
+    truth = walkers(60)
+    frames = frames_of(truth)
+    # Persons 0 and 1 swap tracks 7 and 9 at frame 30; person 0 then loses its track (9) in frames 40-44 and comes
+    # back on a new track 11, while track 9 is gone.
+    hyps = []
+    for f in range(60):
+        h = {7: truth[f, int(f >= 30)]}
+        if f < 40:
+            h[9] = truth[f, int(f < 30)]
+        elif f >= 45:
+            h[11] = truth[f, 0]
+        hyps.append(tracks(h, seed=f))
+    events = switches(frames, hyps)
+    assert [(e["frame"], e["person"], e["from_track"], e["to_track"]) for e in events] == [
+        (30, 0, 7, 9), (30, 1, 9, 7), (45, 0, 9, 11),
+    ]  # fmt: skip
+    swap_0, swap_1, new = events
+    assert swap_0["to_track_was"] == 1 and swap_1["to_track_was"] == 0  # each took the other's track
+    assert swap_0["from_track_reported"] and swap_0["unmatched_frames"] == 0  # a swap on the spot
+    assert new["to_track_was"] is None and not new["from_track_reported"]  # a lost track, then a new one
+    assert new["unmatched_frames"] == 5 and new["time_s"] == pytest.approx(45 / FPS, abs=1e-3)
+    assert len(events) == score(frames, hyps, [0.1] * 60)["id_switches"]
+    # benchmarks/tracking.py --switches prints one line each
+    assert print_switches(1, events) == events
+    lines = capsys.readouterr().out.splitlines()
+    assert len(lines) == 3 and lines[2] == (
+        "sequence 1 frame 45 (3.0 s): person 0, track 9 -> 11 (a new track, after 5 frames without a track; "
+        "track 9 not reported)"
+    )
