@@ -62,6 +62,13 @@ class Cost:
 # and the exporter): the shipped weights. The pose network's U-Net moves MPJPE, the detector AP50 (its boxes then
 # move MPJPE in detector mode, which the pose network's row already includes with reference boxes).
 KNOWN_COST = {
+    # posenet/weights/frames (2026-12-08: the default weights trained 85 more minutes with the mesh-body sets with
+    # hard negatives; an option for single frames), the same 36 scenes: day 4 twin 4.529 -> 4.548 cm, alt 6.368 ->
+    # 6.372, alt-mesh 5.838 -> 5.857 (OpenVINO bf16 -> int8, benchmarks/backend_accuracy.py; benchmarks/RESULTS.md,
+    # "Per-frame pose weights", 2026-12-08).
+    "unet-b83264a74cc10401eb26": Cost(
+        0.019, 0.0, "benchmarks/RESULTS.md 2026-12-08, frames weights, day 4 twin, alt and alt-mesh"
+    ),
     # posenet/weights/default (2026-12-07, fine-tuned at 64x64 crops), the same 36 scenes: day 4 twin 4.561 -> 4.592
     # cm, alt 6.482 -> 6.507, alt-mesh 6.350 -> 6.365 (benchmarks/RESULTS.md, "64x64 crops", 2026-12-07).
     "unet-63560a736fd45ba97c3b": Cost(

@@ -95,6 +95,7 @@ def test_the_shipped_weights_have_their_int8_cost_on_record(tmp_path):
         PoseEstimator.from_checkpoint(),
         PersonDetector.from_checkpoint(),
         PoseEstimator.from_checkpoint(depth_pose),  # the depth-only pair
+        PoseEstimator.from_checkpoint(POSE_WEIGHTS.with_name("frames.safetensors")),  # the per-frame option
         PersonDetector.from_checkpoint(depth_detector),
     ]
     for network in networks:
