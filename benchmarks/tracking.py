@@ -60,6 +60,7 @@ def detect(
     threads: int | None,
     detector: Path | None = None,
     flip_test: bool | None = None,
+    pose: Path | None = None,
 ) -> None:
     """Run the pipeline in detector mode on every frame of ``data`` and write one JSON line per frame."""
     from pipeline.track import Tracker
@@ -69,7 +70,11 @@ def detect(
     from service.validation import ValidatedScene
 
     pipe = ScenePipeline.from_checkpoints(
-        detector_checkpoint=detector, backend=backend, threads=threads, flip_test=flip_test
+        pose_checkpoint=pose,
+        detector_checkpoint=detector,
+        backend=backend,
+        threads=threads,
+        flip_test=flip_test,
     )
     # The views as the service decodes them (tests/pipeline/test_parity.py): the persons equal the served ones.
     ds = read_dataset(data, gt, pipe.read_size)
@@ -343,6 +348,11 @@ def main(argv: list[str] | None = None) -> dict:
     )
     p.add_argument("--threads", type=int, default=None, help="the runtimes' intra-op threads")
     p.add_argument(
+        "--pose-checkpoint",
+        type=Path,
+        help="the pipeline's pose network (default: the shipped weights), e.g. posenet/weights/frames.safetensors",
+    )
+    p.add_argument(
         "--detector-checkpoint", type=Path, help="the pipeline's detector (default: the shipped weights)"
     )
     p.add_argument("--flip-test", action=argparse.BooleanOptionalAction, default=None,
@@ -405,7 +415,7 @@ def main(argv: list[str] | None = None) -> dict:
     else:
         if args.redetect or not args.detections.is_file():
             detect(args.data, gt, args.detections, args.backend, args.threads, args.detector_checkpoint,
-                   args.flip_test)  # fmt: skip
+                   args.flip_test, args.pose_checkpoint)  # fmt: skip
         with open(args.detections) as f:
             detections = {r["id"]: r for r in map(json.loads, f)}
         report["source"] = f"offline: {args.detections}"
