@@ -43,9 +43,7 @@ from pipeline.track_eval import (
     breakdown,
     evaluate,
     goal_lines,
-    run_tracker,
     score,
-    switches,
 )
 from posenet.data.mvor import load_annotations, pose_joints, room_up
 from posenet.runtime.execution import machine_line
@@ -406,9 +404,9 @@ def main(argv: list[str] | None = None) -> dict:
         )
         for seq, rows in sequences(gt).items():
             hyps, ms = zip(*(served_tracks(lines, frame_id) for frame_id, _ in rows), strict=True)
-            report["sequences"][seq] = figures = score([f for _, f in rows], list(hyps), list(ms))
-            if args.switches:
-                figures["switch_events"] = print_switches(seq, switches([f for _, f in rows], list(hyps)))
+            report["sequences"][seq] = figures = score(
+                [f for _, f in rows], list(hyps), list(ms), switch_events=args.switches
+            )
             background = [lines[i]["response"]["timings"].get("background") for i, _ in rows]
             if all(b is not None for b in background):  # answered since timings.background exists
                 figures["background_ms_mean"] = round(float(np.mean(background)), 3)
@@ -434,7 +432,9 @@ def main(argv: list[str] | None = None) -> dict:
                 continue
             for frame_id, frame in rows:
                 frame.views = views.get(frame_id)
-            report["sequences"][seq] = evaluate([f for _, f in rows], Tracker(config))
+            report["sequences"][seq] = evaluate(
+                [f for _, f in rows], Tracker(config), switch_events=args.switches
+            )
             if args.breakdown:
                 report["sequences"][seq]["breakdown"] = b = breakdown([f for _, f in rows], Tracker(config))
                 print(
@@ -445,17 +445,13 @@ def main(argv: list[str] | None = None) -> dict:
                 print("  false positives (confirmed track-frames on no annotated person):")
                 for name, n in b["false_positives"].items():
                     print(f"  {n:>5}  {name}")
-            if args.switches:
-                hyps, _ = run_tracker([f for _, f in rows], Tracker(config))
-                report["sequences"][seq]["switch_events"] = print_switches(
-                    seq, switches([f for _, f in rows], hyps)
-                )
             if args.births:
                 report["sequences"][seq]["births"] = rows_of = births([f for _, f in rows], Tracker(config))
                 for b in rows_of:
                     print(f"sequence {seq} track {b['track']}: {b['frames']} frames, {b['near_share']:.0%} near a "
                           f"person; first frames {b['first_height_mm']} mm along up, spread {b['first_spread_mm']} mm")  # fmt: skip
     for seq, figures in report["sequences"].items():
+        print_switches(seq, figures.get("switch_events", []))
         print(
             f"sequence {seq}: {figures['frames']} frames, {figures['gt_person_frames']} annotated person-frames; "
             f"{figures['ignored_track_frames']} track-frames on persons in view but not annotated left out"

@@ -228,11 +228,14 @@ def run_tracker(
     return hyps, ms
 
 
-def evaluate(frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GATE_MM) -> dict:
-    """Track one sequence's ``frames`` (in time order) with ``tracker`` and measure it (module docstring)."""
+def evaluate(
+    frames: list[SequenceFrame], tracker: Tracker, gate_mm: float = GATE_MM, switch_events: bool = False
+) -> dict:
+    """Track one sequence's ``frames`` (in time order) with ``tracker`` and measure it (module docstring;
+    ``switch_events``: as :func:`score`)."""
     background_ms: list[float] = []
     hyps, ms = run_tracker(frames, tracker, background_ms)
-    figures = score(frames, hyps, ms, gate_mm)
+    figures = score(frames, hyps, ms, gate_mm, switch_events)
     if any(fr.views is not None for fr in frames):  # part of track_ms: the room's static depth
         figures["background_ms_mean"] = round(float(np.mean(background_ms)), 3)
     return figures
@@ -265,13 +268,8 @@ def _accumulate(frames: list[SequenceFrame], hyps: list[dict], gate_mm: float):
     return acc, kept, ignored
 
 
-def switches(frames: list[SequenceFrame], hyps: list[dict], gate_mm: float = GATE_MM) -> list[dict]:
-    """Each id switch that :func:`score` counts (``motmetrics``' SWITCH events), with what led to it: the frame
-    and its time, the ``person``, the track it had (``from_track``) and the one it has now (``to_track``), whom
-    ``to_track`` followed before (``to_track_was``: a person id, or None for a track new to the evaluation), whether
-    ``from_track`` is still reported in that frame (on someone else, or on nobody), and for how many frames before
-    it the person had no track (``unmatched_frames``: a lost track and a new one, against a swap on the spot)."""
-    acc, _, _ = _accumulate(frames, hyps, gate_mm)
+def _switch_events(acc, frames: list[SequenceFrame], hyps: list[dict]) -> list[dict]:
+    """:func:`switches` from the accumulator :func:`_accumulate` made of ``hyps``."""
     out, track_of, person_of, last_frame = [], {}, {}, {}
     for (f, _), ev in acc.mot_events.iterrows():
         if ev["Type"] not in ("MATCH", "SWITCH"):
@@ -288,7 +286,22 @@ def switches(frames: list[SequenceFrame], hyps: list[dict], gate_mm: float = GAT
     return out
 
 
-def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_mm: float = GATE_MM) -> dict:
+def switches(frames: list[SequenceFrame], hyps: list[dict], gate_mm: float = GATE_MM) -> list[dict]:
+    """Each id switch that :func:`score` counts (``motmetrics``' SWITCH events), with what led to it: the frame
+    and its time, the ``person``, the track it had (``from_track``) and the one it has now (``to_track``), whom
+    ``to_track`` followed before (``to_track_was``: a person id, or None for a track new to the evaluation), whether
+    ``from_track`` is still reported in that frame (on someone else, or on nobody), and for how many frames before
+    it the person had no track (``unmatched_frames``: a lost track and a new one, against a swap on the spot)."""
+    return _switch_events(_accumulate(frames, hyps, gate_mm)[0], frames, hyps)
+
+
+def score(
+    frames: list[SequenceFrame],
+    hyps: list[dict],
+    ms: list[float],
+    gate_mm: float = GATE_MM,
+    switch_events: bool = False,
+) -> dict:
     """Measure tracks against the ground truth (module docstring).
 
     Args:
@@ -296,6 +309,7 @@ def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_m
         hyps: per frame, ``{track_id: person}`` of the confirmed tracks; a person has ``raw`` and ``joints``
             (smoothed), (J, 3) mm: :func:`run_tracker`'s, or :class:`TrackedPerson` s of a served stream.
         ms: the tracker's milliseconds per frame.
+        switch_events: also list each id switch (``"switch_events"``: :func:`switches`, from the same matching).
     """
     acc, kept, ignored = _accumulate(frames, hyps, gate_mm)
     import motmetrics as mm
@@ -357,6 +371,7 @@ def score(frames: list[SequenceFrame], hyps: list[dict], ms: list[float], gate_m
         "track_ms_mean": round(float(np.mean(ms)), 3),
         "track_ms_p95": round(float(np.percentile(ms, 95)), 3),
         "gate_mm": gate_mm,
+        **({"switch_events": _switch_events(acc, frames, hyps)} if switch_events else {}),
     }
 
 

@@ -157,6 +157,7 @@ def test_switches_tell_a_swap_on_the_spot_from_a_lost_track_and_a_new_one(monkey
     assert new["to_track_was"] is None and not new["from_track_reported"]  # a lost track, then a new one
     assert new["unmatched_frames"] == 5 and new["time_s"] == pytest.approx(45 / FPS, abs=1e-3)
     assert len(events) == score(frames, hyps, [0.1] * 60)["id_switches"]
+    assert score(frames, hyps, [0.1] * 60, switch_events=True)["switch_events"] == events  # one matching for both
     # benchmarks/tracking.py --switches prints one line each
     assert print_switches(1, events) == events
     lines = capsys.readouterr().out.splitlines()
